@@ -1,0 +1,64 @@
+/* gen3d/providers.h - the plug-in points of the pipeline: inpainting, depth estimation,
+ * candidate masks and prompts. Each is a small table of function pointers with a `ctx`.
+ *
+ * The world loop only sees these tables. Implementations: classical weight-free ones
+ * (src/classic), and neural ones (src/models) chosen once by the CLI from the checkpoints
+ * given. Every implementation is deterministic for a given seed.
+ */
+#ifndef G3D_PROVIDERS_H
+#define G3D_PROVIDERS_H
+
+#include "gen3d/camera.h"
+#include "gen3d/image.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Fills the masked pixels of an image with plausible content. */
+typedef struct g3d_inpainter {
+    const char *name;
+    void *ctx;
+    /* image: (h, w, 3), modified in place where mask > 0.5; pixels outside the mask are
+     * left bit-identical. mask: (h, w, 1), 1 = fill. prompt: text or NULL. */
+    g3d_status (*inpaint)(void *ctx, g3d_image *image, const g3d_image *mask, const char *prompt,
+                          uint64_t seed);
+    void (*free)(void *ctx); /* releases ctx; may be NULL */
+} g3d_inpainter;
+
+/* Estimates metric depth (and optionally intrinsics) for an image. */
+typedef struct g3d_depth_estimator {
+    const char *name;
+    void *ctx;
+    /* rgb: (h, w, 3). known: (h, w, 1) metric depth of pixels already known (0 = unknown),
+     * or NULL. mask: (h, w, 1), 1 = pixels whose depth is wanted, or NULL for all.
+     * depth_out: created by the callee, (h, w, 1) metres; pixels outside the mask are copied
+     * from `known`. K_io: on input the camera if known (fx > 0), else zeroed; estimators
+     * that predict intrinsics fill it when it was unknown. May be NULL. */
+    g3d_status (*estimate)(void *ctx, const g3d_image *rgb, const g3d_image *known, const g3d_image *mask,
+                           g3d_image *depth_out, g3d_intrinsics *K_io);
+    void (*free)(void *ctx);
+} g3d_depth_estimator;
+
+/* Proposes candidate object masks with confidence scores (SAM-like). */
+typedef struct g3d_mask_set {
+    int n;             /* number of masks */
+    int w, h;
+    uint8_t *masks;    /* (n, h, w), 0/1 */
+    float *scores;     /* (n) confidence in [0, 1] */
+} g3d_mask_set;
+void g3d_mask_set_free(g3d_mask_set *s);
+
+typedef struct g3d_mask_provider {
+    const char *name;
+    void *ctx;
+    /* rgb (h, w, 3), depth (h, w, 1) metres (0 = invalid). out is filled (caller frees with
+     * g3d_mask_set_free). */
+    g3d_status (*propose)(void *ctx, const g3d_image *rgb, const g3d_image *depth, g3d_mask_set *out);
+    void (*free)(void *ctx);
+} g3d_mask_provider;
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* G3D_PROVIDERS_H */
