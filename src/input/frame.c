@@ -1,0 +1,105 @@
+/* Building the input frame from files: RGB-D pairs and the Middlebury default input. */
+#include "gen3d/frame.h"
+#include "gen3d/depthio.h"
+#include "gen3d/imageio.h"
+
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+void g3d_frame_free(g3d_frame *f)
+{
+    if (!f) return;
+    g3d_image_free(&f->rgb);
+    g3d_image_free(&f->depth);
+    g3d_image_free(&f->heldout);
+    memset(f, 0, sizeof *f);
+}
+
+g3d_status g3d_frame_validate(const g3d_frame *f, const char *label)
+{
+    if (f->rgb.c != 3) return G3D_ERR(G3D_ERR_FORMAT, "%s: colour image must have 3 channels", label);
+    if (f->depth.w != f->rgb.w || f->depth.h != f->rgb.h)
+        return G3D_ERR(G3D_ERR_MISMATCH, "%s: depth is %dx%d but the image is %dx%d", label, f->depth.w, f->depth.h,
+                       f->rgb.w, f->rgb.h);
+    if (f->cam.K.width != f->rgb.w || f->cam.K.height != f->rgb.h || !(f->cam.K.fx > 0) || !(f->cam.K.fy > 0))
+        return G3D_ERR(G3D_ERR_ARG, "%s: intrinsics do not describe the %dx%d image", label, f->rgb.w, f->rgb.h);
+    size_t valid = 0, n = g3d_image_size(&f->depth);
+    for (size_t i = 0; i < n; i++) valid += f->depth.data[i] > 0;
+    if (valid == 0) return G3D_ERR(G3D_ERR_FORMAT, "%s: depth has no valid pixel (all zero, NaN or infinite)", label);
+    return G3D_OK;
+}
+
+g3d_status g3d_frame_load_rgbd(const char *rgb_path, const char *depth_path, double depth_scale, g3d_intrinsics K,
+                               g3d_frame *f)
+{
+    g3d_status rc;
+    memset(f, 0, sizeof *f);
+    if ((rc = g3d_image_load(rgb_path, 3, &f->rgb)) != G3D_OK) return rc;
+    if ((rc = g3d_depth_load(depth_path, depth_scale, &f->depth)) != G3D_OK) { g3d_frame_free(f); return rc; }
+    if (f->depth.w != f->rgb.w || f->depth.h != f->rgb.h) {
+        rc = G3D_ERR(G3D_ERR_MISMATCH, "%s: depth is %dx%d but %s is %dx%d", depth_path, f->depth.w, f->depth.h,
+                     rgb_path, f->rgb.w, f->rgb.h);
+        g3d_frame_free(f);
+        return rc;
+    }
+    if (!(K.fx > 0)) {
+        K = g3d_intrinsics_from_fov(60.0, f->rgb.w, f->rgb.h);
+        g3d_log(G3D_LOG_INFO, "no intrinsics given: assuming a 60 degree horizontal field of view (fx = %.1f px)", K.fx);
+    } else {
+        K.width = f->rgb.w;
+        K.height = f->rgb.h;
+    }
+    f->cam.K = K;
+    f->cam.c2w = g3d_mat4_identity();
+    snprintf(f->name, sizeof f->name, "rgbd");
+    if ((rc = g3d_frame_validate(f, depth_path)) != G3D_OK) g3d_frame_free(f);
+    return rc;
+}
+
+/* Picks the first of two candidate names that exists in dir (malloc'd path). */
+static char *pick(const char *dir, const char *a, const char *b)
+{
+    struct stat st;
+    char *p = g3d_path_join(dir, a);
+    if (p && stat(p, &st) == 0) return p;
+    free(p);
+    return g3d_path_join(dir, b);
+}
+
+g3d_status g3d_frame_load_middlebury(const char *dir, g3d_frame *f)
+{
+    g3d_status rc;
+    g3d_array disp = {0};
+    char *left = pick(dir, "motorcycle_left.png", "im0.png");
+    char *right = pick(dir, "motorcycle_right.png", "im1.png");
+    char *npz = g3d_path_join(dir, "motorcycle_disp.npz");
+    memset(f, 0, sizeof *f);
+    if (!left || !right || !npz) { rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory"); goto done; }
+    if ((rc = g3d_image_load(left, 3, &f->rgb)) != G3D_OK) goto done;
+    if ((rc = g3d_image_load(right, 3, &f->heldout)) != G3D_OK) goto done;
+    if ((rc = g3d_npz_load(npz, NULL, &disp)) != G3D_OK) goto done;
+    if (disp.ndim != 2 || disp.shape[0] != f->rgb.h || disp.shape[1] != f->rgb.w) {
+        rc = G3D_ERR(G3D_ERR_MISMATCH, "%s: disparity shape does not match the %dx%d image", npz, f->rgb.w, f->rgb.h);
+        goto done;
+    }
+    if ((rc = g3d_image_create(&f->depth, f->rgb.w, f->rgb.h, 1)) != G3D_OK) goto done;
+    memcpy(f->depth.data, disp.data, g3d_image_size(&f->depth) * sizeof(float));
+    g3d_disparity_to_depth(&f->depth, G3D_MIDDLEBURY_F, G3D_MIDDLEBURY_BASELINE_M, G3D_MIDDLEBURY_DOFFS);
+
+    f->cam.K = g3d_intrinsics_make(G3D_MIDDLEBURY_F, G3D_MIDDLEBURY_F, G3D_MIDDLEBURY_CX0, G3D_MIDDLEBURY_CY, f->rgb.w, f->rgb.h);
+    f->cam.c2w = g3d_mat4_identity();
+    f->heldout_cam.K = g3d_intrinsics_make(G3D_MIDDLEBURY_F, G3D_MIDDLEBURY_F, G3D_MIDDLEBURY_CX0 + G3D_MIDDLEBURY_DOFFS,
+                                           G3D_MIDDLEBURY_CY, f->heldout.w, f->heldout.h);
+    f->heldout_cam.c2w = g3d_mat4_identity();
+    f->heldout_cam.c2w.m[0][3] = G3D_MIDDLEBURY_BASELINE_M;
+    snprintf(f->name, sizeof f->name, "middlebury-motorcycle");
+    rc = g3d_frame_validate(f, dir);
+done:
+    if (rc != G3D_OK) g3d_frame_free(f);
+    g3d_array_free(&disp);
+    free(left);
+    free(right);
+    free(npz);
+    return rc;
+}
