@@ -46,6 +46,21 @@ mkdir -p "$T/mine"; echo keep >"$T/mine/file.txt"
 expect 1 "refuses to replace a user folder" "$GEN3D" scene --width 8 --height 8 -q -o "$T/mine"
 [ -s "$T/mine/file.txt" ] && ok "user folder untouched" || bad "user folder untouched"
 
+# prepare: the default input (from the shared copy) and an RGB-D pair.
+MB="$G3D_SHARED_DIR/testdata/middlebury2014_motorcycle_skimage"
+expect 0 "prepare default input" "$GEN3D" prepare --default-input "$MB" -q -o "$T/frame"
+for f in rgb.png depth.png depth.npy heldout.png cameras.json points.ply; do
+    [ -s "$T/frame/$f" ] && ok "prepare wrote $f" || bad "prepare wrote $f"
+done
+expect 0 "info prepared cloud" "$GEN3D" info "$T/frame/points.ply"
+grep -q "343274 points" "$T/out" && ok "cloud has every valid pixel" || bad "cloud has every valid pixel"
+expect 0 "prepare rgb-d" "$GEN3D" prepare -i "$MB/im0.png" --depth "$MB/depth_mm.png" --fx 994.978 --cx 311.193 --cy 254.877 -q -o "$T/frame2"
+expect 1 "prepare mismatched depth" "$GEN3D" prepare -i "$T/views/rgb_000.png" --depth "$MB/depth_mm.png" -o "$T/never2"
+grep -q "depth is 741x500" "$T/err" && ok "mismatch message" || bad "mismatch message"
+[ ! -e "$T/never2" ] && ok "no folder after mismatch" || bad "no folder after mismatch"
+expect 1 "prepare missing default input" "$GEN3D" prepare --default-input "$T/nothing-here" -o "$T/never3"
+expect 2 "prepare -i without depth" "$GEN3D" prepare -i "$MB/im0.png" -o "$T/never3"
+
 # info
 expect 0 "info depth png" "$GEN3D" info "$T/views/depth_000.png"
 grep -q "48x32" "$T/out" && ok "info size" || bad "info size"

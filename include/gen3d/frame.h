@@ -43,6 +43,16 @@ g3d_status g3d_frame_load_rgbd(const char *rgb_path, const char *depth_path, dou
  * translation of +0.193001 m along x with its own principal point cx1 = cx0 + doffs. */
 g3d_status g3d_frame_load_middlebury(const char *dir, g3d_frame *f);
 
+/* Lifts every `stride`-th pixel with valid depth to a coloured world point (the frame's
+ * camera is the world frame). *out is created by the call. */
+struct g3d_points;
+g3d_status g3d_frame_to_points(const g3d_frame *f, int stride, struct g3d_points *out);
+
+/* Writes the frame as a folder: rgb.png, depth.png (16-bit mm), depth.npy (metres),
+ * cameras.json (the input camera, then the held-out camera if any), heldout.png, and
+ * points.ply (the lifted cloud). Atomic: nothing is left at `dir` on failure. */
+g3d_status g3d_frame_save(const g3d_frame *f, const char *dir);
+
 #define G3D_MIDDLEBURY_F 994.978
 #define G3D_MIDDLEBURY_CX0 311.193
 #define G3D_MIDDLEBURY_CY 254.877

@@ -2,6 +2,9 @@
 #include "gen3d/frame.h"
 #include "gen3d/depthio.h"
 #include "gen3d/imageio.h"
+#include "gen3d/cameras_json.h"
+#include "gen3d/ply.h"
+#include <math.h>
 
 #include <stdlib.h>
 #include <string.h>
@@ -101,5 +104,61 @@ done:
     free(left);
     free(right);
     free(npz);
+    return rc;
+}
+
+g3d_status g3d_frame_to_points(const g3d_frame *f, int stride, g3d_points *out)
+{
+    int64_t n = 0;
+    if (stride < 1) return G3D_ERR(G3D_ERR_ARG, "lifting stride must be >= 1");
+    for (int y = 0; y < f->depth.h; y += stride)
+        for (int x = 0; x < f->depth.w; x += stride) n += *g3d_image_px(&f->depth, x, y) > 0;
+    G3D_TRY(g3d_points_create(out, n, 0));
+    n = 0;
+    for (int y = 0; y < f->depth.h; y += stride)
+        for (int x = 0; x < f->depth.w; x += stride) {
+            float z = *g3d_image_px(&f->depth, x, y);
+            if (z <= 0) continue;
+            g3d_vec3 p = g3d_camera_unproject(&f->cam, x, y, z);
+            const float *c = g3d_image_px(&f->rgb, x, y);
+            out->xyz[3 * n] = (float)p.x;
+            out->xyz[3 * n + 1] = (float)p.y;
+            out->xyz[3 * n + 2] = (float)p.z;
+            for (int k = 0; k < 3; k++) out->rgb[3 * n + k] = (uint8_t)lrintf(255.0f * fminf(1.0f, fmaxf(0.0f, c[k])));
+            n++;
+        }
+    return G3D_OK;
+}
+
+g3d_status g3d_frame_save(const g3d_frame *f, const char *dir)
+{
+    char *tmp = NULL, *p = NULL;
+    g3d_camera_list cams = {0};
+    g3d_points pts = {0};
+    g3d_status rc = g3d_atomic_dir_begin(dir, &tmp);
+    if (rc != G3D_OK) return rc;
+#define SAVE(name, call) \
+    if (rc == G3D_OK) { p = g3d_path_join(tmp, name); rc = p ? (call) : G3D_ERR(G3D_ERR_NOMEM, "out of memory"); free(p); }
+    SAVE("rgb.png", g3d_image_save_png(p, &f->rgb, 8));
+    SAVE("depth.png", g3d_depth_save(p, &f->depth));
+    SAVE("depth.npy", g3d_depth_save(p, &f->depth));
+    if (f->heldout.data) SAVE("heldout.png", g3d_image_save_png(p, &f->heldout, 8));
+    if (rc == G3D_OK && (rc = g3d_camera_list_create(&cams, f->heldout.data ? 2 : 1)) == G3D_OK) {
+        cams.cams[0] = f->cam;
+        rc = g3d_camera_list_set_name(&cams, 0, "rgb.png");
+        if (rc == G3D_OK && f->heldout.data) {
+            cams.cams[1] = f->heldout_cam;
+            rc = g3d_camera_list_set_name(&cams, 1, "heldout.png");
+        }
+    }
+    SAVE("cameras.json", g3d_cameras_json_write(p, &cams));
+    if (rc == G3D_OK) rc = g3d_frame_to_points(f, 1, &pts);
+    SAVE("points.ply", g3d_ply_write_points(p, &pts));
+#undef SAVE
+    if (rc == G3D_OK) rc = g3d_atomic_dir_commit(tmp, dir);
+    if (rc != G3D_OK) g3d_atomic_dir_abort(tmp);
+    free(tmp);
+    g3d_camera_list_free(&cams);
+    g3d_points_free(&pts);
     return rc;
 }
