@@ -287,14 +287,14 @@ TEST(hostile_files)
     g3d_depth_save(test_tmp("dep21.npy"), &dep);
     g3d_frame fr;
     g3d_intrinsics K = {0};
-    CHECK_FAILS(g3d_frame_load_rgbd(test_tmp("rgb20.png"), test_tmp("dep21.npy"), 0, K, &fr));
+    CHECK_FAILS(g3d_frame_load_rgbd(test_tmp("rgb20.png"), test_tmp("dep21.npy"), 0, K, 0, &fr));
     /* 19. all-invalid (NaN) depth */
     g3d_image_free(&dep);
     g3d_image_create(&dep, 20, 10, 1);
     for (int i = 0; i < 200; i++) dep.data[i] = NAN;
     int64_t shape[2] = {10, 20};
     g3d_npy_save(test_tmp("nan.npy"), dep.data, 2, shape);
-    CHECK_FAILS(g3d_frame_load_rgbd(test_tmp("rgb20.png"), test_tmp("nan.npy"), 0, K, &fr));
+    CHECK_FAILS(g3d_frame_load_rgbd(test_tmp("rgb20.png"), test_tmp("nan.npy"), 0, K, 0, &fr));
     /* 20. a 3-D array used as depth */
     int64_t s3[3] = {2, 10, 10};
     g3d_npy_save(test_tmp("rank3.npy"), dep.data, 3, s3);

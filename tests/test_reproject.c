@@ -140,9 +140,9 @@ TEST(icl_nuim_frame0_to_frame4)
     g3d_frame f0, f4;
     g3d_intrinsics K = g3d_intrinsics_make(525, 525, 319.5, 239.5, 640, 480);
     CHECK_OK(g3d_frame_load_rgbd(test_shared("testdata/icl_nuim_livingroom1_open3d/color/00000.jpg"),
-                                 test_shared("testdata/icl_nuim_livingroom1_open3d/depth/00000.png"), 1000, K, &f0));
+                                 test_shared("testdata/icl_nuim_livingroom1_open3d/depth/00000.png"), 1000, K, 0, &f0));
     CHECK_OK(g3d_frame_load_rgbd(test_shared("testdata/icl_nuim_livingroom1_open3d/color/00004.jpg"),
-                                 test_shared("testdata/icl_nuim_livingroom1_open3d/depth/00004.png"), 1000, K, &f4));
+                                 test_shared("testdata/icl_nuim_livingroom1_open3d/depth/00004.png"), 1000, K, 0, &f4));
     g3d_mat4 T0, T4;
     CHECK(read_icl_pose(0, &T0) && read_icl_pose(4, &T4));
     if (!f0.rgb.data || !f4.rgb.data) return;

@@ -30,10 +30,12 @@ void g3d_frame_free(g3d_frame *f);
  * intrinsics match the image. `label` names the input in messages. */
 g3d_status g3d_frame_validate(const g3d_frame *f, const char *label);
 
-/* RGB file + depth file (any format of depthio.h; `depth_scale` as in g3d_depth_load) + K.
- * K.fx <= 0 means unknown: then a 60-degree horizontal field of view is assumed and logged. */
+/* RGB file + depth file (any format of depthio.h; `depth_scale` as in g3d_depth_load) + the
+ * camera: K.fx > 0 gives the focal length (K.fy <= 0: same as fx; K.cx, K.cy < 0: the image
+ * centre); otherwise fov_deg > 0 gives the horizontal field of view; otherwise 60 degrees is
+ * assumed and logged. K's width and height are taken from the image. */
 g3d_status g3d_frame_load_rgbd(const char *rgb_path, const char *depth_path, double depth_scale,
-                               g3d_intrinsics K, g3d_frame *f);
+                               g3d_intrinsics K, double fov_deg, g3d_frame *f);
 
 /* The built-in default input: Middlebury 2014 "Motorcycle" (the copy that scikit-image ships,
  * 741 x 500) from folder `dir`, holding motorcycle_left.png, motorcycle_right.png and
@@ -52,6 +54,11 @@ g3d_status g3d_frame_to_points(const g3d_frame *f, int stride, struct g3d_points
  * cameras.json (the input camera, then the held-out camera if any), heldout.png, and
  * points.ply (the lifted cloud). Atomic: nothing is left at `dir` on failure. */
 g3d_status g3d_frame_save(const g3d_frame *f, const char *dir);
+
+/* Downscales the frame so that its longer side is at most max_side (no-op if it already is):
+ * colour by area averaging, depth by nearest sampling (no invented depths at edges), the
+ * intrinsics accordingly; the held-out view likewise. */
+g3d_status g3d_frame_limit_size(g3d_frame *f, int max_side);
 
 #define G3D_MIDDLEBURY_F 994.978
 #define G3D_MIDDLEBURY_CX0 311.193

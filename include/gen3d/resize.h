@@ -10,6 +10,8 @@
  *   G3D_RESIZE_CUBIC_HALF        the same mapping with a = -0.5 (Catmull-Rom / PIL's kernel).
  *   G3D_RESIZE_AREA              box filter with fractional pixel coverage (OpenCV INTER_AREA
  *                                when shrinking); when enlarging it falls back to bilinear.
+ *   G3D_RESIZE_NEAREST           the source pixel whose centre is nearest (for depth and masks,
+ *                                where averaging across an edge would invent values).
  *
  * All modes are separable (rows first, then columns) and computed in double precision.
  * Channels are interleaved and resized independently.
@@ -29,6 +31,7 @@ typedef enum g3d_resize_mode {
     G3D_RESIZE_CUBIC_OPENCV,
     G3D_RESIZE_CUBIC_HALF,
     G3D_RESIZE_AREA,
+    G3D_RESIZE_NEAREST,
     G3D_RESIZE_MODE_COUNT
 } g3d_resize_mode;
 

@@ -319,6 +319,9 @@ g3d_status g3d_inpaint_patchmatch(g3d_image *image, const g3d_image *mask, const
         int32_t *nnf_l = malloc(sizeof(int32_t) * n);
         float *dist_l = malloc(sizeof(float) * n);
         if (!targets || !nnf_l || !dist_l) { free(targets); free(nnf_l); free(dist_l); rc = G3D_ERR(G3D_ERR_NOMEM, "inpaint: out of memory"); break; }
+        /* Only target pixels get a match; the rest stay -1 so that the next level never
+         * upsamples an unset entry. */
+        for (size_t i = 0; i < n; i++) nnf_l[i] = -1;
         int have_sources = 0;
         for (size_t i = 0; i < n; i++) have_sources |= l->src[i];
         if (have_sources) {
@@ -340,8 +343,6 @@ g3d_status g3d_inpaint_patchmatch(g3d_image *image, const g3d_image *mask, const
                 patchmatch(l, rr, targets, nt, nnf_l, dist_l, pp->pm_iters, &rng);
                 vote(l, rr, targets, nt, nnf_l, dist_l);
             }
-        } else {
-            for (size_t i = 0; i < n; i++) nnf_l[i] = -1;
         }
         free(targets);
         free(nnf);

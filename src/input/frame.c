@@ -4,6 +4,7 @@
 #include "gen3d/imageio.h"
 #include "gen3d/cameras_json.h"
 #include "gen3d/ply.h"
+#include "gen3d/resize.h"
 #include <math.h>
 
 #include <stdlib.h>
@@ -34,7 +35,7 @@ g3d_status g3d_frame_validate(const g3d_frame *f, const char *label)
 }
 
 g3d_status g3d_frame_load_rgbd(const char *rgb_path, const char *depth_path, double depth_scale, g3d_intrinsics K,
-                               g3d_frame *f)
+                               double fov_deg, g3d_frame *f)
 {
     g3d_status rc;
     memset(f, 0, sizeof *f);
@@ -46,14 +47,16 @@ g3d_status g3d_frame_load_rgbd(const char *rgb_path, const char *depth_path, dou
         g3d_frame_free(f);
         return rc;
     }
-    if (!(K.fx > 0)) {
-        K = g3d_intrinsics_from_fov(60.0, f->rgb.w, f->rgb.h);
-        g3d_log(G3D_LOG_INFO, "no intrinsics given: assuming a 60 degree horizontal field of view (fx = %.1f px)", K.fx);
-    } else {
-        K.width = f->rgb.w;
-        K.height = f->rgb.h;
+    g3d_intrinsics d = g3d_intrinsics_from_fov(fov_deg > 0 ? fov_deg : 60.0, f->rgb.w, f->rgb.h);
+    if (K.fx > 0) {
+        d.fx = K.fx;
+        d.fy = K.fy > 0 ? K.fy : K.fx;
+        if (K.cx >= 0) d.cx = K.cx;
+        if (K.cy >= 0) d.cy = K.cy;
+    } else if (!(fov_deg > 0)) {
+        g3d_log(G3D_LOG_INFO, "no intrinsics given: assuming a 60 degree horizontal field of view (fx = %.1f px)", d.fx);
     }
-    f->cam.K = K;
+    f->cam.K = d;
     f->cam.c2w = g3d_mat4_identity();
     snprintf(f->name, sizeof f->name, "rgbd");
     if ((rc = g3d_frame_validate(f, depth_path)) != G3D_OK) g3d_frame_free(f);
@@ -161,4 +164,41 @@ g3d_status g3d_frame_save(const g3d_frame *f, const char *dir)
     g3d_camera_list_free(&cams);
     g3d_points_free(&pts);
     return rc;
+}
+
+/* Resizes img in place to w x h with the given mode. */
+static g3d_status resize_in_place(g3d_image *img, int w, int h, g3d_resize_mode mode)
+{
+    g3d_image out;
+    G3D_TRY(g3d_image_resize(img, w, h, mode, &out));
+    g3d_image_free(img);
+    *img = out;
+    return G3D_OK;
+}
+
+static void scaled_size(int w, int h, int max_side, int *ow, int *oh)
+{
+    double s = (double)max_side / (w > h ? w : h);
+    *ow = (int)lround(w * s);
+    *oh = (int)lround(h * s);
+    if (*ow < 1) *ow = 1;
+    if (*oh < 1) *oh = 1;
+}
+
+g3d_status g3d_frame_limit_size(g3d_frame *f, int max_side)
+{
+    int w, h;
+    if (max_side < 16) return G3D_ERR(G3D_ERR_ARG, "maximum image side %d is too small (at least 16)", max_side);
+    if (f->rgb.w > max_side || f->rgb.h > max_side) {
+        scaled_size(f->rgb.w, f->rgb.h, max_side, &w, &h);
+        G3D_TRY(resize_in_place(&f->rgb, w, h, G3D_RESIZE_AREA));
+        G3D_TRY(resize_in_place(&f->depth, w, h, G3D_RESIZE_NEAREST));
+        f->cam.K = g3d_intrinsics_resize(f->cam.K, w, h);
+    }
+    if (f->heldout.data && (f->heldout.w > max_side || f->heldout.h > max_side)) {
+        scaled_size(f->heldout.w, f->heldout.h, max_side, &w, &h);
+        G3D_TRY(resize_in_place(&f->heldout, w, h, G3D_RESIZE_AREA));
+        f->heldout_cam.K = g3d_intrinsics_resize(f->heldout_cam.K, w, h);
+    }
+    return G3D_OK;
 }

@@ -39,6 +39,7 @@ static g3d_status build_taps(int in, int out, g3d_resize_mode mode, axis_taps *t
     if (mode == G3D_RESIZE_AREA && out > in) mode = G3D_RESIZE_BILINEAR;
     if (mode == G3D_RESIZE_AREA) t->ntaps = (int)ceil(scale) + 2;
     else if (mode == G3D_RESIZE_CUBIC_OPENCV || mode == G3D_RESIZE_CUBIC_HALF) t->ntaps = 4;
+    else if (mode == G3D_RESIZE_NEAREST) t->ntaps = 1;
     else t->ntaps = 2;
     t->index = calloc((size_t)out * t->ntaps, sizeof(int));
     t->weight = calloc((size_t)out * t->ntaps, sizeof(double));
@@ -83,6 +84,10 @@ static g3d_status build_taps(int in, int out, g3d_resize_mode mode, axis_taps *t
             }
             break;
         }
+        case G3D_RESIZE_NEAREST:
+            ix[0] = clampi((int)floor((o + 0.5) * scale), 0, in - 1);
+            w[0] = 1.0;
+            break;
         default:
             taps_free(t);
             return G3D_ERR(G3D_ERR_ARG, "resize: unknown mode %d", (int)mode);
