@@ -5,7 +5,7 @@
  * the holes, and the residual is interpolated harmonically (membrane.h). Inside a hole the
  * result is smooth and matches the known depth at its rim; where a hole reaches the image
  * border the fitted plane carries the surface on (a floor keeps receding) instead of the
- * depth freezing at its last value.
+ * depth freezing at its last value, within the depth range found on the holes' rim.
  */
 #ifndef G3D_DEPTH_COMPLETE_H
 #define G3D_DEPTH_COMPLETE_H

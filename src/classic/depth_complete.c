@@ -40,7 +40,15 @@ g3d_status g3d_depth_complete(g3d_image *depth, const g3d_image *fill_mask)
             if (x < w - 1 && dist[i + 1] + 1 < dist[i]) dist[i] = dist[i + 1] + 1;
             if (y < h - 1 && dist[i + w] + 1 < dist[i]) dist[i] = dist[i + w] + 1;
         }
-    for (size_t i = 0; i < n; i++) band[i] = known[i] && dist[i] <= BAND;
+    /* The depth range on the rim of the holes bounds the completion (as it bounds a harmonic
+     * fill): a plane extrapolated far past its data could otherwise run towards the horizon,
+     * and every later view would build on that and reach further. */
+    double rmin = INFINITY, rmax = 0;
+    for (size_t i = 0; i < n; i++) {
+        band[i] = known[i] && dist[i] <= BAND;
+        if (band[i]) { rmin = fmin(rmin, v[i]); rmax = fmax(rmax, v[i]); }
+    }
+    if (rmax == 0) { rmin = vmin; rmax = vmax; }
 
     g3d_status rc = vmax == 0 ? G3D_ERR(G3D_ERR_ARG, "depth completion: no valid depth to complete from")
                               : g3d_membrane_fill_planar(v, known, band, w, h);
@@ -49,9 +57,7 @@ g3d_status g3d_depth_complete(g3d_image *depth, const g3d_image *fill_mask)
             for (int x = 0; x < w; x++) {
                 size_t i = (size_t)y * w + x;
                 if (known[i]) continue;
-                /* A plane extrapolated far past the data may cross zero inverse depth (the
-                 * horizon); keep the completion within a sane range of the known depths. */
-                double inv = fmin(fmax((double)v[i], 0.25 * vmin), 4.0 * vmax);
+                double inv = fmin(fmax((double)v[i], rmin), rmax);
                 depth->data[i] = (float)(1.0 / inv);
             }
     free(v);

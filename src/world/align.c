@@ -78,7 +78,8 @@ g3d_status g3d_align_depth(g3d_image *depth_new, const g3d_image *depth_cloud, c
         rc = g3d_membrane_fill_planar(r, known, NULL, w, h);
         if (rc == G3D_OK)
             for (size_t i = 0; i < n; i++)
-                if (mask->data[i] < 0.5f && depth_new->data[i] > 0) depth_new->data[i] *= expf(r[i]);
+                if (mask->data[i] < 0.5f && depth_new->data[i] > 0) /* no correction beyond what any match showed */
+                    depth_new->data[i] *= expf(fminf(fmaxf(r[i], -lmax), lmax));
     }
     free(r);
     free(tmp);
