@@ -76,6 +76,11 @@ printf 'garbage' >"$T/garbage.ply"
 expect 1 "info corrupt ply" "$GEN3D" info "$T/garbage.ply"
 expect 1 "info unknown type" "$GEN3D" info "$T/broken.txt"
 expect 2 "info without file" "$GEN3D" info
+expect 0 "info checkpoint" "$GEN3D" info "$G3D_SHARED_DIR/golden/depth_anything_v2_vits/weights.safetensors"
+grep -q "239 tensors" "$T/out" && grep -q "Depth Anything V2 (vits" "$T/out" && grep -q "pretrained.blocks.0.attn.qkv.weight.*F16 *\[1152, 384\]" "$T/out" \
+    && ok "info lists tensors and the architecture" || bad "info lists tensors and the architecture"
+printf 'PK\003\004 not really' >"$T/model.pth"
+expect 1 "info pth" "$GEN3D" info "$T/model.pth"
 
 echo "$pass passed, $fail failed"
 [ "$fail" -eq 0 ]

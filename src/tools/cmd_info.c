@@ -1,6 +1,9 @@
 /* gen3d info: describes an image, depth map, array, PLY or camera file. */
 #include "cli.h"
 #include "gen3d/cameras_json.h"
+#include "gen3d/ckpt.h"
+
+#include <cjson/cJSON.h>
 #include "gen3d/depthio.h"
 #include "gen3d/imageio.h"
 #include "gen3d/ply.h"
@@ -15,7 +18,9 @@ static const char *DESCRIPTION =
     "Images (.png .jpg): size, channels, value range; 16-bit PNGs are also read as depth in\n"
     "millimetres. Depth and arrays (.pfm .npy .npz): shape, range, invalid fraction.\n"
     "PLY (.ply): point cloud or 3D Gaussians, count, SH degree, bounds, opacity range.\n"
-    "Cameras (.json): our cameras.json or nerfstudio transforms.json.";
+    "Cameras (.json): our cameras.json or nerfstudio transforms.json.\n"
+    "Checkpoints (.safetensors): every tensor (name, dtype, shape), the parameter count, the\n"
+    "metadata and the recognised architecture.";
 
 static void range_line(const char *label, const float *v, size_t n, size_t stride)
 {
@@ -140,6 +145,29 @@ static int info_cameras(const char *path)
     return G3D_EXIT_OK;
 }
 
+static int info_checkpoint(const char *path)
+{
+    g3d_ckpt *ck;
+    g3d_status rc = g3d_ckpt_open(path, &ck);
+    if (rc != G3D_OK) return g3d_cli_fail(rc);
+    char arch[160];
+    const char *a = g3d_ckpt_arch(ck, arch, sizeof arch);
+    printf("%s: checkpoint, %lld tensors, %lld parameters%s%s\n", path, (long long)g3d_ckpt_count(ck),
+           (long long)g3d_ckpt_numel(ck), a ? ", " : "", a ? a : "");
+    const cJSON *meta = g3d_ckpt_meta(ck);
+    for (const cJSON *m = meta ? meta->child : NULL; m; m = m->next) printf("  metadata %s: %s\n", m->string, m->valuestring);
+    for (int64_t i = 0; i < g3d_ckpt_count(ck); i++) {
+        const g3d_tensor_info *t = g3d_ckpt_tensor(ck, i);
+        char shape[160];
+        int k = snprintf(shape, sizeof shape, "[");
+        for (int d = 0; d < t->ndim && k < (int)sizeof shape; d++) k += snprintf(shape + k, sizeof shape - k, "%s%lld", d ? ", " : "", (long long)t->shape[d]);
+        if (k < (int)sizeof shape) snprintf(shape + k, sizeof shape - k, "]");
+        printf("  %-60s %-4s %s\n", t->name, g3d_dtype_name(t->dtype), shape);
+    }
+    g3d_ckpt_free(ck);
+    return G3D_EXIT_OK;
+}
+
 static int run(int argc, char **argv)
 {
     g3d_cli_common common;
@@ -157,7 +185,8 @@ static int run(int argc, char **argv)
     if (!strcmp(ext, "pfm") || !strcmp(ext, "npy") || !strcmp(ext, "npz")) return info_array(pos[0], ext);
     if (!strcmp(ext, "ply")) return info_ply(pos[0]);
     if (!strcmp(ext, "json")) return info_cameras(pos[0]);
-    return g3d_cli_errorf(G3D_EXIT_FAIL, "%s: unknown file type '.%s' (png, jpg, pfm, npy, npz, ply, json)", pos[0], ext);
+    if (!strcmp(ext, "safetensors") || !strcmp(ext, "pth") || !strcmp(ext, "pt") || !strcmp(ext, "ckpt")) return info_checkpoint(pos[0]);
+    return g3d_cli_errorf(G3D_EXIT_FAIL, "%s: unknown file type '.%s' (png, jpg, pfm, npy, npz, ply, json, safetensors)", pos[0], ext);
 }
 
-const g3d_command g3d_cmd_info = {"info", "describe an image, depth map, array, PLY or camera file", run};
+const g3d_command g3d_cmd_info = {"info", "describe an image, depth map, array, PLY, camera file or checkpoint", run};
