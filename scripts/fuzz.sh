@@ -6,12 +6,13 @@ set -eu
 cd "$(dirname "$0")/.."
 secs=${1:-60}
 CC=clang cmake -S . -B build-fuzz -DCMAKE_BUILD_TYPE=Debug -DG3D_FUZZ=ON -DG3D_CUDA=OFF >/dev/null
-cmake --build build-fuzz -j "$(nproc)" --target fuzz_safetensors fuzz_zip fuzz_ply
-for t in safetensors zip ply; do
+cmake --build build-fuzz -j "$(nproc)" --target fuzz_ckpt fuzz_pickle fuzz_zip fuzz_ply
+for t in ckpt pickle zip ply; do
     corpus=build-fuzz/corpus-$t
     mkdir -p "$corpus"
     case $t in
-        safetensors) cp tests/fixtures/*.safetensors "$corpus/" ;;
+        ckpt) cp tests/fixtures/*.safetensors tests/fixtures/*.pth "$corpus/" ;;
+        pickle) for f in tests/fixtures/state.pth tests/fixtures/ok_handmade.pth; do unzip -p "$f" '*/data.pkl' >"$corpus/$(basename "$f").pkl"; done ;;
         zip) cp tests/fixtures/*.npz "$corpus/" ;;
         ply) printf 'ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n' >"$corpus/seed.ply" ;;
     esac

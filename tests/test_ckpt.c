@@ -112,6 +112,7 @@ TEST(hostile_headers)
         {"fractional offset", "{\"a\":{\"dtype\":\"F32\",\"shape\":[2],\"data_offsets\":[0.5,8.5]}}", 9},
         {"missing offsets", "{\"a\":{\"dtype\":\"F32\",\"shape\":[2]}}", 8},
         {"metadata not strings", "{\"__metadata__\":{\"x\":1},\"a\":{\"dtype\":\"F32\",\"shape\":[2],\"data_offsets\":[0,8]}}", 8},
+        {"two metadata objects", "{\"__metadata__\":{\"x\":\"1\"},\"__metadata__\":{\"y\":\"2\"}}", 0},
         {"duplicate name", "{\"a\":{\"dtype\":\"F32\",\"shape\":[1],\"data_offsets\":[0,4]},\"a\":{\"dtype\":\"F32\",\"shape\":[1],\"data_offsets\":[4,8]}}", 8},
     };
     for (size_t k = 0; k < sizeof cases / sizeof *cases; k++) {
@@ -132,10 +133,79 @@ TEST(hostile_headers)
     CHECK_FAILS(g3d_ckpt_open_memory("PK\x03\x04rest-of-a-zip", 18, "model.pth", &ck));
 }
 
+#define FIXDIR G3D_SOURCE_DIR "/tests/fixtures/"
+
+TEST(pytorch_zip)
+{
+    g3d_ckpt *ck;
+    CHECK_OK(g3d_ckpt_open(FIXDIR "state.pth", &ck));
+    if (!ck) return;
+    /* {'model': state_dict, 'model_config': {...}, 'epoch': 7}: state-dict names, no wrapper. */
+    CHECK(g3d_ckpt_count(ck) == 9);
+    float v[20];
+    const char *floats[] = {"encoder.weight", "encoder.bias", "encoder.norm.weight", "head.0.weight"};
+    for (int k = 0; k < 4; k++) {
+        const g3d_tensor_info *t = g3d_ckpt_find(ck, floats[k]);
+        CHECK_MSG(t != NULL, "%s missing", floats[k]);
+        if (!t) continue;
+        CHECK_OK(g3d_ckpt_read(ck, floats[k], 0, NULL, v));
+        for (int i = 0; i < t->numel; i++) CHECK_MSG(v[i] == (float)((i - 5) * 0.75), "%s[%d] = %g", floats[k], i, v[i]);
+    }
+    int64_t s34[2] = {3, 4};
+    CHECK_OK(g3d_ckpt_read(ck, "encoder.weight", 2, s34, v));
+    /* A view 8 elements into a storage it shares with another tensor. */
+    CHECK_OK(g3d_ckpt_read(ck, "view", 0, NULL, v));
+    CHECK(v[0] == (float)((8 - 5) * 0.75) && v[5] == (float)((13 - 5) * 0.75));
+    const g3d_tensor_info *sc = g3d_ckpt_find(ck, "scalar");
+    CHECK(sc && sc->ndim == 0 && sc->numel == 1);
+    CHECK_OK(g3d_ckpt_read(ck, "head.0.steps", 0, NULL, v));
+    CHECK(v[0] == -2 && v[4] == 2);
+    CHECK_OK(g3d_ckpt_read(ck, "mask", 0, NULL, v));
+    CHECK(v[0] == 1 && v[1] == 0);
+    /* Everything else is JSON. */
+    const cJSON *cfg = cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "model_config");
+    const cJSON *dim = cJSON_GetObjectItemCaseSensitive(cfg, "dim");
+    CHECK(cJSON_IsArray(dim) && cJSON_GetArrayItem(dim, 0)->valuedouble == 384);
+    CHECK(cJSON_IsString(cJSON_GetObjectItemCaseSensitive(cfg, "encoder")));
+    CHECK(cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(cfg, "use_norm")) && cJSON_IsNull(cJSON_GetObjectItemCaseSensitive(cfg, "extra")));
+    CHECK(cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "epoch")->valuedouble == 7);
+    g3d_ckpt_free(ck);
+
+    /* The MoGe-2 golden checkpoint in the official layout. */
+    CHECK_OK(g3d_ckpt_open(test_shared("golden/moge2_vits_config/model.pt"), &ck));
+    if (!ck) return;
+    const g3d_tensor_info *t = g3d_ckpt_find(ck, "encoder.backbone.blocks.0.attn.qkv.weight");
+    CHECK(t && t->dtype == G3D_DT_F16 && t->shape[0] == 1152 && t->shape[1] == 384);
+    CHECK(g3d_ckpt_find(ck, "scale_head.0.weight") != NULL);
+    CHECK(cJSON_IsObject(cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "model_config")));
+    printf("  MoGe-2 golden checkpoint: %lld tensors, %lld parameters\n", (long long)g3d_ckpt_count(ck), (long long)g3d_ckpt_numel(ck));
+    g3d_ckpt_free(ck);
+}
+
+TEST(hostile_pickles)
+{
+    g3d_ckpt *ck;
+    CHECK_OK(g3d_ckpt_open(FIXDIR "ok_handmade.pth", &ck));
+    g3d_ckpt_free(ck);
+    const char *bad[] = {"evil.pth", "noncontig.pth", "overrun.pth", "missing_storage.pth", "short_storage.pth",
+                         "truncated.pth", "badop.pth", "underflow.pth", "leftover.pth"};
+    for (size_t k = 0; k < sizeof bad / sizeof *bad; k++) {
+        char path[1024];
+        snprintf(path, sizeof path, FIXDIR "%s", bad[k]);
+        CHECK_FAILS(g3d_ckpt_open(path, &ck));
+    }
+    CHECK_FAILS(g3d_ckpt_open(FIXDIR "evil.pth", &ck));
+    CHECK(strstr(g3d_error_message(), "system") != NULL);
+    /* A zip that is not a checkpoint. */
+    CHECK_FAILS(g3d_ckpt_open(FIXDIR "resize_ref.npz", &ck));
+}
+
 int main(void)
 {
     RUN(golden_weights);
     RUN(every_dtype);
     RUN(hostile_headers);
+    RUN(pytorch_zip);
+    RUN(hostile_pickles);
     return test_summary();
 }

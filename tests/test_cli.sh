@@ -79,6 +79,8 @@ expect 2 "info without file" "$GEN3D" info
 expect 0 "info checkpoint" "$GEN3D" info "$G3D_SHARED_DIR/golden/depth_anything_v2_vits/weights.safetensors"
 grep -q "239 tensors" "$T/out" && grep -q "Depth Anything V2 (vits" "$T/out" && grep -q "pretrained.blocks.0.attn.qkv.weight.*F16 *\[1152, 384\]" "$T/out" \
     && ok "info lists tensors and the architecture" || bad "info lists tensors and the architecture"
+expect 0 "info pytorch checkpoint" "$GEN3D" info "$G3D_SOURCE_DIR/tests/fixtures/state.pth"
+grep -q "9 tensors" "$T/out" && grep -q "encoder.norm.weight.*BF16" "$T/out" && ok "info lists torch tensors" || bad "info lists torch tensors"
 printf 'PK\003\004 not really' >"$T/model.pth"
 expect 1 "info pth" "$GEN3D" info "$T/model.pth"
 

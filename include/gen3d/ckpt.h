@@ -50,10 +50,13 @@ typedef struct g3d_tensor_info {
 
 typedef struct g3d_ckpt g3d_ckpt;   /* opaque */
 
-/* Opens a checkpoint file, detected from its content (not its name): safetensors (memory-
- * mapped). PyTorch zip checkpoints (.pth/.pt/.ckpt) are recognised and refused with a clear
- * message until their reader lands. On success *out owns the mapping and the index; free
- * with g3d_ckpt_free. */
+/* Opens a checkpoint file, detected from its content (not its name): safetensors, or a PyTorch
+ * zip checkpoint (.pth/.pt/.ckpt). The file is memory-mapped; tensors point into it. PyTorch
+ * naming rule: tensors are named by their dotted path in the saved object; when exactly one
+ * top-level dict entry holds tensors and it is a dict (e.g. {'model': state_dict,
+ * 'model_config': {...}}), that key is left out, so tensors keep their state-dict names.
+ * Only contiguous tensors in uncompressed little-endian storages are accepted. On success
+ * *out owns the mapping and the index; free with g3d_ckpt_free. */
 g3d_status g3d_ckpt_open(const char *path, g3d_ckpt **out);
 /* The same over a caller-owned buffer of n bytes that must outlive the checkpoint; `label`
  * names it in messages. */

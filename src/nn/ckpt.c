@@ -78,9 +78,8 @@ static int cmp_by_name(const void *a, const void *b)
 /* Detects the format, builds the index and the name lookup. ck->data/size/path are set. */
 static g3d_status index_checkpoint(g3d_ckpt *ck)
 {
-    if (ck->size >= 4 && !memcmp(ck->data, "PK\x03\x04", 4))
-        return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: PyTorch zip checkpoints are not supported yet; convert to .safetensors", ck->path);
-    G3D_TRY(g3d__safetensors_index(ck));
+    if (ck->size >= 4 && !memcmp(ck->data, "PK\x03\x04", 4)) G3D_TRY(g3d__torch_index(ck));
+    else G3D_TRY(g3d__safetensors_index(ck));
     ck->by_name = malloc(sizeof(int64_t) * (size_t)(ck->n ? ck->n : 1));
     if (!ck->by_name) return G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", ck->path);
     for (int64_t i = 0; i < ck->n; i++) ck->by_name[i] = i;

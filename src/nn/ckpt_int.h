@@ -18,7 +18,8 @@ struct g3d_ckpt {
     cJSON *meta;                /* owned, may be NULL */
 };
 
-/* Parses a safetensors buffer (ck->data, ck->size) into ck's index. */
+/* Parse the buffer (ck->data, ck->size) into ck's index: safetensors, and PyTorch zip files. */
 g3d_status g3d__safetensors_index(g3d_ckpt *ck);
+g3d_status g3d__torch_index(g3d_ckpt *ck);
 
 #endif

@@ -57,7 +57,7 @@ g3d_status g3d__safetensors_index(g3d_ckpt *ck)
     if (!r || !ck->tensors) { rc = G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", L); goto done; }
     for (cJSON *e = root->child; e && rc == G3D_OK; e = e->next) {
         if (!strcmp(e->string, "__metadata__")) {
-            if (!cJSON_IsObject(e)) { rc = G3D_ERR(G3D_ERR_FORMAT, "%s: __metadata__ is not an object", L); break; }
+            if (!cJSON_IsObject(e) || ck->meta) { rc = G3D_ERR(G3D_ERR_FORMAT, "%s: __metadata__ is not one JSON object", L); break; }
             for (cJSON *m = e->child; m; m = m->next)
                 if (!cJSON_IsString(m)) { rc = G3D_ERR(G3D_ERR_FORMAT, "%s: __metadata__ value '%s' is not a string", L, m->string); break; }
             if (rc == G3D_OK && !(ck->meta = cJSON_Duplicate(e, 1))) rc = G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", L);

@@ -19,7 +19,7 @@ static const char *DESCRIPTION =
     "millimetres. Depth and arrays (.pfm .npy .npz): shape, range, invalid fraction.\n"
     "PLY (.ply): point cloud or 3D Gaussians, count, SH degree, bounds, opacity range.\n"
     "Cameras (.json): our cameras.json or nerfstudio transforms.json.\n"
-    "Checkpoints (.safetensors): every tensor (name, dtype, shape), the parameter count, the\n"
+    "Checkpoints (.safetensors, .pth, .pt, .ckpt): every tensor (name, dtype, shape), the parameter count, the\n"
     "metadata and the recognised architecture.";
 
 static void range_line(const char *label, const float *v, size_t n, size_t stride)

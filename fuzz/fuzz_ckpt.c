@@ -1,5 +1,7 @@
-/* libFuzzer target: the safetensors index must reject or accept any bytes without crashing,
- * and every tensor it accepts must be readable. Build with -DG3D_FUZZ=ON (clang); run with
+/* libFuzzer target: the checkpoint readers (safetensors and PyTorch zip) must reject or accept
+ * any bytes without crashing,
+
+ * and every tensor they accept must be readable. Build with -DG3D_FUZZ=ON (clang); run with
  * scripts/fuzz.sh. */
 #include "gen3d/ckpt.h"
 
