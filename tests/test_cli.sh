@@ -2,16 +2,7 @@
 # The command-line tool: help, version, exit codes, outputs, and no output left behind on failure.
 set -u
 T="$G3D_TEST_TMP/cli"
-rm -rf "$T"; mkdir -p "$T"
-pass=0; fail=0
-ok()  { pass=$((pass + 1)); echo "ok   $1"; }
-bad() { fail=$((fail + 1)); echo "FAIL $1"; }
-# expect CODE NAME COMMAND...: runs COMMAND, checks its exit status
-expect() {
-    code=$1; name=$2; shift 2
-    "$@" >"$T/out" 2>"$T/err"; rc=$?
-    if [ "$rc" -eq "$code" ]; then ok "$name"; else bad "$name (exit $rc, expected $code)"; sed 's/^/    /' "$T/err"; fi
-}
+. "$G3D_SOURCE_DIR/tests/cli_lib.sh"
 
 expect 0 "help" "$GEN3D" --help
 grep -q "scene" "$T/out" && grep -q "info" "$T/out" && ok "help lists commands" || bad "help lists commands"
@@ -84,5 +75,4 @@ grep -q "9 tensors" "$T/out" && grep -q "encoder.norm.weight.*BF16" "$T/out" && 
 printf 'PK\003\004 not really' >"$T/model.pth"
 expect 1 "info pth" "$GEN3D" info "$T/model.pth"
 
-echo "$pass passed, $fail failed"
-[ "$fail" -eq 0 ]
+finish

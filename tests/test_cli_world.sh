@@ -2,15 +2,7 @@
 # gen3d world from the command line: the dataset it writes and its refusals.
 set -u
 T="$G3D_TEST_TMP/cli_world"
-rm -rf "$T"; mkdir -p "$T"
-pass=0; fail=0
-ok()  { pass=$((pass + 1)); echo "ok   $1"; }
-bad() { fail=$((fail + 1)); echo "FAIL $1"; }
-expect() {
-    code=$1; name=$2; shift 2
-    "$@" >"$T/out" 2>"$T/err"; rc=$?
-    if [ "$rc" -eq "$code" ]; then ok "$name"; else bad "$name (exit $rc, expected $code)"; sed 's/^/    /' "$T/err"; fi
-}
+. "$G3D_SOURCE_DIR/tests/cli_lib.sh"
 MB="$G3D_SHARED_DIR/testdata/middlebury2014_motorcycle_skimage"
 
 expect 0 "world help" "$GEN3D" world --help
@@ -58,5 +50,4 @@ expect 1 "missing depth file" "$GEN3D" world -i "$MB/im0.png" --depth "$T/none.p
 [ ! -e "$T/never" ] && ok "no output folder after failures" || bad "no output folder after failures"
 ls "$T" | grep -q "tmp-" && bad "temporary folders left behind" || ok "no temporary folders left behind"
 
-echo "$pass passed, $fail failed"
-[ "$fail" -eq 0 ]
+finish
