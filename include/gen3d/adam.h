@@ -37,6 +37,10 @@ void g3d_adam_free(g3d_adam *a);
  * gradients). Moments grow with the model if it grew (new Gaussians get zero moments). */
 g3d_status g3d_adam_step(g3d_adam *a, g3d_gaussians *params, const g3d_gaussians *grads);
 
+/* Extends the moments with zeros up to the model's current count (after Gaussians were
+ * appended to it). */
+g3d_status g3d_adam_grow(g3d_adam *a, const g3d_gaussians *params);
+
 /* Keeps the moments of the Gaussians with keep[i] != 0 (call with the same mask as
  * g3d_gaussians_compact on the model). */
 void g3d_adam_compact(g3d_adam *a, const uint8_t *keep);

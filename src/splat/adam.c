@@ -31,6 +31,27 @@ void g3d_adam_free(g3d_adam *a)
 }
 
 /* n elements of one array. */
+g3d_status g3d_adam_grow(g3d_adam *a, const g3d_gaussians *p)
+{
+    if (a->m.capacity < p->n) {
+        G3D_TRY(g3d_gaussians_reserve(&a->m, p->capacity));
+        G3D_TRY(g3d_gaussians_reserve(&a->v, p->capacity));
+    }
+    /* Gaussians added since the moments were last sized start from zero moments. */
+    int64_t K3 = 3 * G3D_SH_COEFFS(p->sh_degree);
+    for (int64_t i = a->m.n; i < p->n; i++)
+        for (int which = 0; which < 2; which++) {
+            g3d_gaussians *s = which ? &a->v : &a->m;
+            memset(s->means + 3 * i, 0, 3 * sizeof(float));
+            memset(s->log_scales + 3 * i, 0, 3 * sizeof(float));
+            memset(s->rots + 4 * i, 0, 4 * sizeof(float));
+            s->opacity_logits[i] = 0;
+            memset(s->sh + K3 * i, 0, sizeof(float) * (size_t)K3);
+        }
+    a->m.n = a->v.n = p->n;
+    return G3D_OK;
+}
+
 static void update(float *p, const float *g, float *m, float *v, int64_t n, double lr, const g3d_adam *a, double bc1, double bc2)
 {
     for (int64_t i = 0; i < n; i++) {
@@ -47,20 +68,7 @@ g3d_status g3d_adam_step(g3d_adam *a, g3d_gaussians *p, const g3d_gaussians *g)
     if (g->n != p->n || g->sh_degree != p->sh_degree || a->m.sh_degree != p->sh_degree)
         return G3D_ERR(G3D_ERR_MISMATCH, "adam: gradients for %lld Gaussians (SH %d), model has %lld (SH %d)", (long long)g->n,
                        g->sh_degree, (long long)p->n, p->sh_degree);
-    if (a->m.capacity < p->n) {
-        G3D_TRY(g3d_gaussians_reserve(&a->m, p->capacity));
-        G3D_TRY(g3d_gaussians_reserve(&a->v, p->capacity));
-    }
-    /* Gaussians added since the last step start from zero moments. */
-    for (int64_t i = a->m.n; i < p->n; i++) {
-        int64_t K3 = 3 * G3D_SH_COEFFS(p->sh_degree);
-        memset(a->m.means + 3 * i, 0, 12); memset(a->v.means + 3 * i, 0, 12);
-        memset(a->m.log_scales + 3 * i, 0, 12); memset(a->v.log_scales + 3 * i, 0, 12);
-        memset(a->m.rots + 4 * i, 0, 16); memset(a->v.rots + 4 * i, 0, 16);
-        a->m.opacity_logits[i] = a->v.opacity_logits[i] = 0;
-        memset(a->m.sh + K3 * i, 0, sizeof(float) * (size_t)K3); memset(a->v.sh + K3 * i, 0, sizeof(float) * (size_t)K3);
-    }
-    a->m.n = a->v.n = p->n;
+    G3D_TRY(g3d_adam_grow(a, p));
     a->step++;
     double bc1 = 1 - pow(a->beta1, (double)a->step), bc2 = 1 - pow(a->beta2, (double)a->step);
     int64_t n = p->n, K = G3D_SH_COEFFS(p->sh_degree);
