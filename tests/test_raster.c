@@ -3,6 +3,8 @@
 #include "gen3d/raster.h"
 #include "testutil.h"
 
+#include <omp.h>
+
 #define SW 16
 #define SH 16
 
@@ -217,8 +219,148 @@ TEST(grad_deg1) { grad_check(1, 0, 2); }
 TEST(grad_deg3) { grad_check(3, 0, 3); }
 TEST(grad_deg2_antialiased) { grad_check(2, 1, 4); }
 
+/* One isotropic Gaussian on the optical axis renders o * exp(-r^2 / (2 (s^2 + eps2d))) with
+ * s = f sigma / z pixels, wherever that alpha is at least 1/255. */
+TEST(single_isotropic)
+{
+    g3d_gaussians g;
+    CHECK_OK(g3d_gaussians_create(&g, 1, 0));
+    g.n = 1;
+    const double z = 4.0, sigma = 0.3, f = 20.0;
+    g.means[2] = (float)z;
+    for (int k = 0; k < 3; k++) g.log_scales[k] = (float)log(sigma);
+    g.rots[0] = 2.0f;                 /* unnormalised identity */
+    g.opacity_logits[0] = 0.0f;       /* o = 0.5 */
+    g.sh[0] = 0.7f; g.sh[1] = -0.2f; g.sh[2] = 0.1f;
+    g3d_camera cam;
+    cam.K = g3d_intrinsics_make(f, f, 20, 15, 41, 31);
+    cam.c2w = g3d_mat4_identity();
+    g3d_raster_settings s;
+    g3d_raster_settings_default(&s);
+    s.bg[0] = 0.25f; s.bg[1] = 0.5f; s.bg[2] = 1.0f;
+    float rgb[41 * 31 * 3], al[41 * 31], dep[41 * 31];
+    int32_t radius;
+    g3d_raster_ws *ws;
+    CHECK_OK(g3d_raster_ws_create(&ws));
+    CHECK_OK(g3d_raster_fwd(ws, &g, &cam, &s, rgb, al, dep, &radius));
+    double sp = f * sigma / z, var = sp * sp + s.eps2d;
+    CHECK(radius == (int)ceil(3 * sqrt(var + sqrt(0.1))));   /* Inria floors the eigen gap at 0.1 */
+    double col[3];
+    for (int ch = 0; ch < 3; ch++) col[ch] = fmax(0.0, 0.5 + G3D_SH_C0 * g.sh[ch]);
+    double maxerr = 0;
+    for (int y = 0; y < 31; y++)
+        for (int x = 0; x < 41; x++) {
+            double dx = x - 20.0, dy = y - 15.0;
+            double a = 0.5 * exp(-(dx * dx + dy * dy) / (2 * var));
+            if (a < 1.0 / 255 || fmax(fabs(dx), fabs(dy)) > radius) a = 0;   /* skipped / outside tiles */
+            int p = y * 41 + x;
+            if (a > 0 && a < 1.1 / 255) continue;   /* float rounding at the cut-off */
+            maxerr = fmax(maxerr, fabs(al[p] - a));
+            maxerr = fmax(maxerr, fabs(dep[p] - a * z));
+            for (int ch = 0; ch < 3; ch++) maxerr = fmax(maxerr, fabs(rgb[3 * p + ch] - (a * col[ch] + (1 - a) * s.bg[ch])));
+        }
+    CHECK_NEAR(maxerr, 0, 2e-6);
+    g3d_raster_ws_free(ws);
+    g3d_gaussians_free(&g);
+}
+
+/* rgb(bg) - rgb(0) = (1 - alpha) bg per pixel; alpha in [0, 1); Gaussians behind the camera or
+ * nearer than the near plane get radius 0 and leave the image untouched. */
+TEST(alpha_and_culling)
+{
+    g3d_gaussians g;
+    random_scene(&g, 5, 1, 7);
+    g3d_camera cam = test_camera();
+    g3d_raster_settings s;
+    g3d_raster_settings_default(&s);
+    float rgb0[SW * SH * 3], rgb1[SW * SH * 3], al[SW * SH];
+    int32_t radii[5];
+    g3d_raster_ws *ws;
+    CHECK_OK(g3d_raster_ws_create(&ws));
+    CHECK_OK(g3d_raster_fwd(ws, &g, &cam, &s, rgb0, al, NULL, radii));
+    s.bg[0] = 1; s.bg[1] = 0.5f; s.bg[2] = 0.25f;
+    CHECK_OK(g3d_raster_fwd(ws, &g, &cam, &s, rgb1, NULL, NULL, NULL));
+    double maxerr = 0, maxal = 0;
+    for (int p = 0; p < SW * SH; p++) {
+        CHECK(al[p] >= 0 && al[p] < 1);
+        maxal = fmax(maxal, al[p]);
+        for (int ch = 0; ch < 3; ch++) maxerr = fmax(maxerr, fabs(rgb1[3 * p + ch] - rgb0[3 * p + ch] - (1 - al[p]) * s.bg[ch]));
+    }
+    CHECK_NEAR(maxerr, 0, 1e-6);
+    CHECK(maxal > 0.3);
+    for (int i = 0; i < 5; i++) CHECK(radii[i] > 0);
+    /* move every Gaussian behind the camera (mirror through its centre) or inside the near plane */
+    g3d_vec3 c = g3d_camera_center(&cam);
+    for (int i = 0; i < 5; i++) {
+        g3d_vec3 p = g3d_v3(g.means[3 * i], g.means[3 * i + 1], g.means[3 * i + 2]);
+        g3d_vec3 q = i == 0 ? g3d_v3_add(c, g3d_v3_scale(g3d_v3_normalize(g3d_v3_sub(p, c)), 0.005))
+                            : g3d_v3_sub(g3d_v3_scale(c, 2), p);
+        g.means[3 * i] = (float)q.x; g.means[3 * i + 1] = (float)q.y; g.means[3 * i + 2] = (float)q.z;
+    }
+    CHECK_OK(g3d_raster_fwd(ws, &g, &cam, &s, rgb1, al, NULL, radii));
+    for (int i = 0; i < 5; i++) CHECK(radii[i] == 0);
+    for (int p = 0; p < SW * SH; p++) {
+        CHECK(al[p] == 0);
+        for (int ch = 0; ch < 3; ch++) CHECK(rgb1[3 * p + ch] == s.bg[ch]);
+    }
+    g3d_raster_ws_free(ws);
+    g3d_gaussians_free(&g);
+}
+
+/* Forward and backward are bit-identical across runs and across thread counts. */
+TEST(deterministic)
+{
+    g3d_gaussians g, g1, g2;
+    g3d_rng rng;
+    g3d_rng_seed(&rng, 11, 3);
+    const int n = 3000, W = 96, H = 72;
+    CHECK_OK(g3d_gaussians_create(&g, n, 2));
+    g.n = n;
+    for (int i = 0; i < n; i++) {
+        g.means[3 * i] = g3d_rng_float(&rng) * 4 - 2;
+        g.means[3 * i + 1] = g3d_rng_float(&rng) * 3 - 1.5f;
+        g.means[3 * i + 2] = g3d_rng_float(&rng) * 4 + 2;
+        for (int k = 0; k < 3; k++) g.log_scales[3 * i + k] = logf(0.03f + 0.05f * g3d_rng_float(&rng));
+        for (int k = 0; k < 4; k++) g.rots[4 * i + k] = g3d_rng_normal(&rng);
+        g.opacity_logits[i] = g3d_rng_normal(&rng);
+        for (int k = 0; k < 27; k++) g.sh[27 * i + k] = 0.3f * g3d_rng_normal(&rng);
+    }
+    g3d_camera cam;
+    cam.K = g3d_intrinsics_from_fov(60, W, H);
+    cam.c2w = g3d_mat4_identity();
+    g3d_raster_settings s;
+    g3d_raster_settings_default(&s);
+    size_t np = (size_t)W * H;
+    float *rgb[2], *d = malloc(sizeof(float) * 3 * np), *g2d[2];
+    for (size_t i = 0; i < 3 * np; i++) d[i] = g3d_rng_float(&rng) - 0.5f;
+    g3d_gaussians *grs[2] = {&g1, &g2};
+    g3d_raster_ws *ws;
+    CHECK_OK(g3d_raster_ws_create(&ws));
+    for (int r = 0; r < 2; r++) {
+        omp_set_num_threads(r == 0 ? 1 : 3);
+        rgb[r] = malloc(sizeof(float) * 3 * np);
+        g2d[r] = calloc(n, sizeof(float));
+        CHECK_OK(g3d_gaussians_create(grs[r], n, 2));
+        CHECK_OK(g3d_raster_fwd(ws, &g, &cam, &s, rgb[r], NULL, NULL, NULL));
+        CHECK_OK(g3d_raster_bwd(ws, &g, d, NULL, NULL, grs[r], g2d[r]));
+    }
+    CHECK(memcmp(rgb[0], rgb[1], sizeof(float) * 3 * np) == 0);
+    CHECK(memcmp(g2d[0], g2d[1], sizeof(float) * n) == 0);
+    CHECK(memcmp(g1.block_, g2.block_, sizeof(float) * (size_t)n * (3 + 3 + 4 + 1 + 27)) == 0);
+    double sum = 0;
+    for (int i = 0; i < n; i++) sum += g2d[0][i];
+    CHECK(sum > 0);
+    g3d_raster_ws_free(ws);
+    for (int r = 0; r < 2; r++) { free(rgb[r]); free(g2d[r]); g3d_gaussians_free(grs[r]); }
+    g3d_gaussians_free(&g);
+    free(d);
+}
+
 int main(void)
 {
+    RUN(single_isotropic);
+    RUN(alpha_and_culling);
+    RUN(deterministic);
     RUN(grad_deg0);
     RUN(grad_deg1);
     RUN(grad_deg3);
