@@ -356,11 +356,67 @@ TEST(deterministic)
     free(d);
 }
 
+/* Init from points: scales against a brute-force 3-NN on clustered points, DC colour, identity
+ * rotation, opacity 0.1. */
+TEST(init_from_points)
+{
+    const int n = 3000;
+    float *xyz = malloc(sizeof(float) * 3 * n), *rgb = malloc(sizeof(float) * 3 * n);
+    g3d_rng rng;
+    g3d_rng_seed(&rng, 5, 5);
+    for (int i = 0; i < n; i++) {
+        /* a dense cluster, a sparse shell and a flat sheet: uneven densities */
+        int kind = i % 3;
+        for (int a = 0; a < 3; a++) {
+            xyz[3 * i + a] = kind == 0 ? 0.2f * g3d_rng_normal(&rng) : 5.0f * g3d_rng_float(&rng) - 2.5f;
+            rgb[3 * i + a] = g3d_rng_float(&rng);
+        }
+        if (kind == 2) xyz[3 * i + 2] = 3.0f;
+    }
+    xyz[3] = xyz[0]; xyz[4] = xyz[1]; xyz[5] = xyz[2];   /* a duplicate point */
+    g3d_gaussians g;
+    CHECK_OK(g3d_gaussians_init_from_points(&g, xyz, rgb, n, 2));
+    CHECK(g.n == n && g.sh_degree == 2);
+    double maxerr = 0;
+    for (int i = 0; i < n; i++) {
+        double best[3] = {1e300, 1e300, 1e300};
+        for (int j = 0; j < n; j++) {
+            if (j == i) continue;
+            double d2 = 0;
+            for (int a = 0; a < 3; a++) d2 += ((double)xyz[3 * j + a] - xyz[3 * i + a]) * ((double)xyz[3 * j + a] - xyz[3 * i + a]);
+            if (d2 < best[2]) {
+                best[2] = d2;
+                for (int k = 2; k > 0 && best[k] < best[k - 1]; k--) { double t = best[k]; best[k] = best[k - 1]; best[k - 1] = t; }
+            }
+        }
+        double want = log(sqrt(fmax((best[0] + best[1] + best[2]) / 3, 1e-7)));
+        for (int a = 0; a < 3; a++) maxerr = fmax(maxerr, fabs(g.log_scales[3 * i + a] - want));
+        CHECK(g.rots[4 * i] == 1 && g.rots[4 * i + 1] == 0 && g.rots[4 * i + 2] == 0 && g.rots[4 * i + 3] == 0);
+        CHECK_NEAR(1 / (1 + exp(-g.opacity_logits[i])), 0.1, 1e-6);
+        for (int a = 0; a < 3; a++) CHECK_NEAR(0.5 + G3D_SH_C0 * g.sh[i * 27 + a], rgb[3 * i + a], 1e-6);
+        CHECK(g.sh[i * 27 + 3] == 0);
+    }
+    CHECK_NEAR(maxerr, 0, 1e-5);
+    g3d_gaussians_free(&g);
+    CHECK_FAILS(g3d_gaussians_init_from_points(&g, xyz, rgb, 0, 0));
+    xyz[7] = NAN;
+    CHECK_FAILS(g3d_gaussians_init_from_points(&g, xyz, rgb, n, 0));
+    /* tiny clouds use the neighbours that exist */
+    CHECK_OK(g3d_gaussians_init_from_points(&g, xyz, rgb, 2, 0));
+    double d2 = 0;
+    for (int a = 0; a < 3; a++) d2 += ((double)xyz[a] - xyz[3 + a]) * ((double)xyz[a] - xyz[3 + a]);
+    CHECK_NEAR(g.log_scales[0], log(sqrt(fmax(d2, 1e-7))), 1e-6);
+    g3d_gaussians_free(&g);
+    free(xyz);
+    free(rgb);
+}
+
 int main(void)
 {
     RUN(single_isotropic);
     RUN(alpha_and_culling);
     RUN(deterministic);
+    RUN(init_from_points);
     RUN(grad_deg0);
     RUN(grad_deg1);
     RUN(grad_deg3);
