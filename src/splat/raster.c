@@ -38,6 +38,7 @@ struct g3d_raster_ws {
     float *conic;     /* (N, 3) a, b, c of the inverse 2D covariance */
     float *opac;      /* (N) effective opacity (sigmoid x compensation) */
     float *depth;     /* (N) view z */
+    float *ext;       /* (N, 2) half-width/height of the box where alpha >= 1/255, pixels */
     float *rgb;       /* (N, 3) */
     uint8_t *clamped; /* (N, 3) colour channel clamped at 0 */
     int32_t *radii;   /* (N) */
@@ -75,6 +76,7 @@ void g3d_raster_ws_free(g3d_raster_ws *ws)
 {
     if (!ws) return;
     free(ws->mean2d); free(ws->conic); free(ws->opac); free(ws->depth); free(ws->rgb);
+    free(ws->ext);
     free(ws->clamped); free(ws->radii); free(ws->rect); free(ws->offs);
     free(ws->inst_gid); free(ws->inst_src); free(ws->inst_tmp); free(ws->rec);
     free(ws->tile_start); free(ws->final_t); free(ws->last);
@@ -98,6 +100,7 @@ static g3d_status ensure_gaussians(g3d_raster_ws *ws, int64_t n)
     ws->cap_n = 0;
     if (!regrow(&ws->mean2d, cn * 2, sizeof(float)) || !regrow(&ws->conic, cn * 3, sizeof(float)) ||
         !regrow(&ws->opac, cn, sizeof(float)) || !regrow(&ws->depth, cn, sizeof(float)) ||
+        !regrow(&ws->ext, cn * 2, sizeof(float)) ||
         !regrow(&ws->rgb, cn * 3, sizeof(float)) || !regrow(&ws->clamped, cn * 3, 1) ||
         !regrow(&ws->radii, cn, sizeof(int32_t)) || !regrow(&ws->rect, cn * 4, sizeof(int32_t)) ||
         !regrow(&ws->offs, cn + 1, sizeof(int64_t)))
@@ -289,8 +292,15 @@ static void project_all(g3d_raster_ws *ws, const g3d_gaussians *g)
         double lam = mid + sqrt(disc > 0.1 ? disc : 0.1);
         int r = (int)ceil(3.0 * sqrt(lam));
         double u = Kin->fx * p.t[0] / p.t[2] + Kin->cx, v = Kin->fy * p.t[1] / p.t[2] + Kin->cy;
-        double x0 = floor((u - r) / TILE), x1 = floor((u + r) / TILE) + 1;
-        double y0 = floor((v - r) / TILE), y1 = floor((v + r) / TILE) + 1;
+        /* alpha = o exp(-d^T conic d / 2) >= 1/255 exactly inside the ellipse
+         * d^T conic d <= 2 ln(255 o), whose box has half-sides sqrt(2 ln(255 o) Sigma'_xx) etc.
+         * Tiles and pixels outside that box cannot contribute, so they are not visited; unlike
+         * a fixed 3-sigma cut this changes no pixel value. */
+        double o = p.sig * p.comp, lvl = 2.0 * log(255.0 * o);
+        if (!(lvl > 0)) continue;
+        double ex = sqrt(lvl * p.a) * 1.0001 + 1e-3, ey = sqrt(lvl * p.c) * 1.0001 + 1e-3;
+        double x0 = floor((u - ex) / TILE), x1 = floor((u + ex) / TILE) + 1;
+        double y0 = floor((v - ey) / TILE), y1 = floor((v + ey) / TILE) + 1;
         if (x0 < 0) x0 = 0;
         if (y0 < 0) y0 = 0;
         if (x1 > ws->gx) x1 = ws->gx;
@@ -298,6 +308,8 @@ static void project_all(g3d_raster_ws *ws, const g3d_gaussians *g)
         if (x1 <= x0 || y1 <= y0) continue;
         rc[0] = (int32_t)x0; rc[1] = (int32_t)y0; rc[2] = (int32_t)x1; rc[3] = (int32_t)y1;
         ws->radii[i] = r;
+        ws->ext[2 * i] = (float)ex;
+        ws->ext[2 * i + 1] = (float)ey;
         ws->mean2d[2 * i] = (float)u;
         ws->mean2d[2 * i + 1] = (float)v;
         ws->conic[3 * i] = (float)(p.c / p.det);
@@ -381,6 +393,18 @@ static g3d_status bin_and_sort(g3d_raster_ws *ws, int64_t n)
 
 /* ---- blend --------------------------------------------------------------------------------- */
 
+/* Pixel box of Gaussian gi inside tile (tx, ty), tile-local inclusive bounds. */
+static void local_box(const g3d_raster_ws *ws, int32_t gi, int tx, int ty, int *x0, int *x1, int *y0, int *y1)
+{
+    const float mx = ws->mean2d[2 * gi] - (float)(tx * TILE), my = ws->mean2d[2 * gi + 1] - (float)(ty * TILE);
+    const float ex = ws->ext[2 * gi], ey = ws->ext[2 * gi + 1];
+    float fx0 = ceilf(mx - ex), fx1 = floorf(mx + ex), fy0 = ceilf(my - ey), fy1 = floorf(my + ey);
+    *x0 = fx0 < 0 ? 0 : (int)fx0;
+    *y0 = fy0 < 0 ? 0 : (int)fy0;
+    *x1 = fx1 > TILE - 1 ? TILE - 1 : (int)fx1;
+    *y1 = fy1 > TILE - 1 ? TILE - 1 : (int)fy1;
+}
+
 static void blend_tile(g3d_raster_ws *ws, int64_t tile, float *rgb, float *alpha, float *depth)
 {
     const int W = ws->W, H = ws->H;
@@ -404,7 +428,11 @@ static void blend_tile(g3d_raster_ws *ws, int64_t tile, float *rgb, float *alpha
         const float o = ws->opac[gi], z = ws->depth[gi];
         const float cr = ws->rgb[3 * gi], cg = ws->rgb[3 * gi + 1], cbl = ws->rgb[3 * gi + 2];
         const int32_t j = (int32_t)(k - a);
-        for (int p = 0; p < TPIX; p++) {
+        int lx0, lx1, ly0, ly1;
+        local_box(ws, gi, tx, ty, &lx0, &lx1, &ly0, &ly1);
+        for (int ly = ly0; ly <= ly1; ly++)
+        for (int lx = lx0; lx <= lx1; lx++) {
+            const int p = ly * TILE + lx;
             if (done[p]) continue;
             float dx = mx - px[p], dy = my - py[p];
             float power = -0.5f * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
@@ -514,7 +542,11 @@ static void blend_tile_bwd(g3d_raster_ws *ws, int64_t tile, const float *d_rgb, 
         const float col[4] = {ws->rgb[3 * gi], ws->rgb[3 * gi + 1], ws->rgb[3 * gi + 2], ws->depth[gi]};
         float g_mx = 0, g_my = 0, g_a = 0, g_b = 0, g_c = 0, g_o = 0;
         float g_col[4] = {0, 0, 0, 0};
-        for (int p = 0; p < TPIX; p++) {
+        int lx0, lx1, ly0, ly1;
+        local_box(ws, gi, tx, ty, &lx0, &lx1, &ly0, &ly1);
+        for (int ly = ly0; ly <= ly1; ly++)
+        for (int lx = lx0; lx <= lx1; lx++) {
+            const int p = ly * TILE + lx;
             if (j > last[p]) continue;
             float dx = mx - px[p], dy = my - py[p];
             float power = -0.5f * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
