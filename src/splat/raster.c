@@ -18,6 +18,8 @@
 #define T_MIN 1e-4f
 /* Floats in one per-instance gradient record: dmean2d (2), dconic (3), dopacity, drgb (3), dz. */
 #define REC 10
+/* Packed per-Gaussian blend record (see pk below). */
+enum { PK_MX, PK_MY, PK_A, PK_B, PK_C, PK_O, PK_Z, PK_RGB, PK_EX = PK_RGB + 3, PK_EY, PK = 16 };
 
 static const double SH_C1 = 0.4886025119029199;
 static const double SH_C2[5] = {1.0925484305920792, -1.0925484305920792, 0.31539156525252005,
@@ -34,12 +36,10 @@ struct g3d_raster_ws {
     g3d_raster_settings s;
     double wr[9], wt[3], campos[3];   /* world-to-camera rotation (row-major) and translation */
     /* per Gaussian */
-    float *mean2d;    /* (N, 2) */
-    float *conic;     /* (N, 3) a, b, c of the inverse 2D covariance */
-    float *opac;      /* (N) effective opacity (sigmoid x compensation) */
-    float *depth;     /* (N) view z */
-    float *ext;       /* (N, 2) half-width/height of the box where alpha >= 1/255, pixels */
-    float *rgb;       /* (N, 3) */
+    /* (N, PK) one 64-byte record per projected Gaussian, everything the blend reads, so each
+     * tile-list entry costs one cache line: mean2d, conic (a, b, c), opacity (sigmoid x
+     * compensation), view z, rgb, half-extent (x, y) of the alpha >= 1/255 box */
+    float *pk;
     uint8_t *clamped; /* (N, 3) colour channel clamped at 0 */
     int32_t *radii;   /* (N) */
     int32_t *rect;    /* (N, 4) tile x0, y0, x1, y1 (exclusive) */
@@ -75,8 +75,7 @@ g3d_status g3d_raster_ws_create(g3d_raster_ws **out)
 void g3d_raster_ws_free(g3d_raster_ws *ws)
 {
     if (!ws) return;
-    free(ws->mean2d); free(ws->conic); free(ws->opac); free(ws->depth); free(ws->rgb);
-    free(ws->ext);
+    free(ws->pk);
     free(ws->clamped); free(ws->radii); free(ws->rect); free(ws->offs);
     free(ws->inst_gid); free(ws->inst_src); free(ws->inst_tmp); free(ws->rec);
     free(ws->tile_start); free(ws->final_t); free(ws->last);
@@ -88,7 +87,8 @@ static int regrow(void *p, size_t n, size_t size)
 {
     void **pp = p;
     free(*pp);
-    *pp = malloc(n > 0 && size > 0 ? n * size : 1);
+    size_t bytes = (n > 0 && size > 0 ? n * size : 1);
+    *pp = aligned_alloc(64, (bytes + 63) / 64 * 64);   /* whole cache lines for the packed records */
     return *pp != NULL;
 }
 
@@ -98,10 +98,7 @@ static g3d_status ensure_gaussians(g3d_raster_ws *ws, int64_t n)
     int64_t c = n + n / 4 + 16;
     size_t cn = (size_t)c;
     ws->cap_n = 0;
-    if (!regrow(&ws->mean2d, cn * 2, sizeof(float)) || !regrow(&ws->conic, cn * 3, sizeof(float)) ||
-        !regrow(&ws->opac, cn, sizeof(float)) || !regrow(&ws->depth, cn, sizeof(float)) ||
-        !regrow(&ws->ext, cn * 2, sizeof(float)) ||
-        !regrow(&ws->rgb, cn * 3, sizeof(float)) || !regrow(&ws->clamped, cn * 3, 1) ||
+    if (!regrow(&ws->pk, cn * PK, sizeof(float)) || !regrow(&ws->clamped, cn * 3, 1) ||
         !regrow(&ws->radii, cn, sizeof(int32_t)) || !regrow(&ws->rect, cn * 4, sizeof(int32_t)) ||
         !regrow(&ws->offs, cn + 1, sizeof(int64_t)))
         return G3D_ERR(G3D_ERR_NOMEM, "raster: out of memory for %lld Gaussians", (long long)n);
@@ -308,15 +305,16 @@ static void project_all(g3d_raster_ws *ws, const g3d_gaussians *g)
         if (x1 <= x0 || y1 <= y0) continue;
         rc[0] = (int32_t)x0; rc[1] = (int32_t)y0; rc[2] = (int32_t)x1; rc[3] = (int32_t)y1;
         ws->radii[i] = r;
-        ws->ext[2 * i] = (float)ex;
-        ws->ext[2 * i + 1] = (float)ey;
-        ws->mean2d[2 * i] = (float)u;
-        ws->mean2d[2 * i + 1] = (float)v;
-        ws->conic[3 * i] = (float)(p.c / p.det);
-        ws->conic[3 * i + 1] = (float)(-p.b / p.det);
-        ws->conic[3 * i + 2] = (float)(p.a / p.det);
-        ws->opac[i] = (float)(p.sig * p.comp);
-        ws->depth[i] = (float)p.t[2];
+        float *q = ws->pk + PK * i;
+        q[PK_MX] = (float)u;
+        q[PK_MY] = (float)v;
+        q[PK_A] = (float)(p.c / p.det);
+        q[PK_B] = (float)(-p.b / p.det);
+        q[PK_C] = (float)(p.a / p.det);
+        q[PK_O] = (float)o;
+        q[PK_Z] = (float)p.t[2];
+        q[PK_EX] = (float)ex;
+        q[PK_EY] = (float)ey;
         double basis[16];
         sh_basis(ws->deg, p.dir[0], p.dir[1], p.dir[2], basis, NULL, NULL, NULL);
         const float *sh = g->sh + (size_t)i * K * 3;
@@ -324,7 +322,7 @@ static void project_all(g3d_raster_ws *ws, const g3d_gaussians *g)
             double col = 0.5;
             for (int k = 0; k < nb; k++) col += basis[k] * sh[3 * k + ch];
             ws->clamped[3 * i + ch] = col < 0;
-            ws->rgb[3 * i + ch] = col < 0 ? 0.0f : (float)col;
+            q[PK_RGB + ch] = col < 0 ? 0.0f : (float)col;
         }
     }
 }
@@ -371,7 +369,7 @@ static g3d_status bin_and_sort(g3d_raster_ws *ws, int64_t n)
     for (int64_t i = 0; i < n; i++) {
         const int32_t *rc = ws->rect + 4 * i;
         uint32_t zb;
-        memcpy(&zb, &ws->depth[i], 4);
+        memcpy(&zb, &ws->pk[PK * i + PK_Z], 4);
         for (int ty = rc[1]; ty < rc[3]; ty++)
             for (int tx = rc[0]; tx < rc[2]; tx++)
                 key[cur[(int64_t)ty * ws->gx + tx]++] = ((uint64_t)zb << 32) | (uint32_t)i;
@@ -396,8 +394,9 @@ static g3d_status bin_and_sort(g3d_raster_ws *ws, int64_t n)
 /* Pixel box of Gaussian gi inside tile (tx, ty), tile-local inclusive bounds. */
 static void local_box(const g3d_raster_ws *ws, int32_t gi, int tx, int ty, int *x0, int *x1, int *y0, int *y1)
 {
-    const float mx = ws->mean2d[2 * gi] - (float)(tx * TILE), my = ws->mean2d[2 * gi + 1] - (float)(ty * TILE);
-    const float ex = ws->ext[2 * gi], ey = ws->ext[2 * gi + 1];
+    const float *q = ws->pk + (size_t)PK * gi;
+    const float mx = q[PK_MX] - (float)(tx * TILE), my = q[PK_MY] - (float)(ty * TILE);
+    const float ex = q[PK_EX], ey = q[PK_EY];
     float fx0 = ceilf(mx - ex), fx1 = floorf(mx + ex), fy0 = ceilf(my - ey), fy1 = floorf(my + ey);
     *x0 = fx0 < 0 ? 0 : (int)fx0;
     *y0 = fy0 < 0 ? 0 : (int)fy0;
@@ -423,10 +422,10 @@ static void blend_tile(g3d_raster_ws *ws, int64_t tile, float *rgb, float *alpha
     const int64_t a = ws->tile_start[tile], b = ws->tile_start[tile + 1];
     for (int64_t k = a; k < b && active > 0; k++) {
         const int32_t gi = ws->inst_gid[k];
-        const float mx = ws->mean2d[2 * gi], my = ws->mean2d[2 * gi + 1];
-        const float ca = ws->conic[3 * gi], cb = ws->conic[3 * gi + 1], cc = ws->conic[3 * gi + 2];
-        const float o = ws->opac[gi], z = ws->depth[gi];
-        const float cr = ws->rgb[3 * gi], cg = ws->rgb[3 * gi + 1], cbl = ws->rgb[3 * gi + 2];
+        const float *q = ws->pk + (size_t)PK * gi;
+        const float mx = q[PK_MX], my = q[PK_MY], ca = q[PK_A], cb = q[PK_B], cc = q[PK_C];
+        const float o = q[PK_O], z = q[PK_Z];
+        const float cr = q[PK_RGB], cg = q[PK_RGB + 1], cbl = q[PK_RGB + 2];
         const int32_t j = (int32_t)(k - a);
         int lx0, lx1, ly0, ly1;
         local_box(ws, gi, tx, ty, &lx0, &lx1, &ly0, &ly1);
@@ -536,10 +535,10 @@ static void blend_tile_bwd(g3d_raster_ws *ws, int64_t tile, const float *d_rgb, 
     for (int64_t k = a + maxlast; k >= a; k--) {
         const int32_t gi = ws->inst_gid[k];
         const int32_t j = (int32_t)(k - a);
-        const float mx = ws->mean2d[2 * gi], my = ws->mean2d[2 * gi + 1];
-        const float ca = ws->conic[3 * gi], cb = ws->conic[3 * gi + 1], cc = ws->conic[3 * gi + 2];
-        const float o = ws->opac[gi];
-        const float col[4] = {ws->rgb[3 * gi], ws->rgb[3 * gi + 1], ws->rgb[3 * gi + 2], ws->depth[gi]};
+        const float *q = ws->pk + (size_t)PK * gi;
+        const float mx = q[PK_MX], my = q[PK_MY], ca = q[PK_A], cb = q[PK_B], cc = q[PK_C];
+        const float o = q[PK_O];
+        const float col[4] = {q[PK_RGB], q[PK_RGB + 1], q[PK_RGB + 2], q[PK_Z]};
         float g_mx = 0, g_my = 0, g_a = 0, g_b = 0, g_c = 0, g_o = 0;
         float g_col[4] = {0, 0, 0, 0};
         int lx0, lx1, ly0, ly1;
