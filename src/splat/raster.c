@@ -391,6 +391,26 @@ static g3d_status bin_and_sort(g3d_raster_ws *ws, int64_t n)
 
 /* ---- blend --------------------------------------------------------------------------------- */
 
+/* exp(x) for x <= 0 (Cephes' reduction and polynomial, about 1 ulp), inlined so the pixel loops
+ * need no libm call; the forward and backward both use it, so they agree exactly. */
+static inline float exp_nonpos(float x)
+{
+    if (x < -87.0f) x = -87.0f;
+    float n = floorf(x * 1.44269504088896341f + 0.5f);
+    float r = x - n * 0.693359375f + n * 2.12194440e-4f;
+    float p = 1.9875691500e-4f;
+    p = p * r + 1.3981999507e-3f;
+    p = p * r + 8.3334519073e-3f;
+    p = p * r + 4.1665795894e-2f;
+    p = p * r + 1.6666665459e-1f;
+    p = p * r + 5.0000001201e-1f;
+    p = p * r * r + r + 1.0f;
+    int32_t bits = ((int32_t)n + 127) << 23;
+    float scale;
+    memcpy(&scale, &bits, sizeof scale);
+    return p * scale;
+}
+
 /* Pixel box of Gaussian gi inside tile (tx, ty), tile-local inclusive bounds. */
 static void local_box(const g3d_raster_ws *ws, int32_t gi, int tx, int ty, int *x0, int *x1, int *y0, int *y1)
 {
@@ -436,7 +456,7 @@ static void blend_tile(g3d_raster_ws *ws, int64_t tile, float *rgb, float *alpha
             float dx = mx - px[p], dy = my - py[p];
             float power = -0.5f * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
             if (power > 0.0f) continue;
-            float al = o * expf(power);
+            float al = o * exp_nonpos(power);
             if (al > ALPHA_MAX) al = ALPHA_MAX;
             if (al < ALPHA_MIN) continue;
             float tn = T[p] * (1.0f - al);
@@ -550,7 +570,7 @@ static void blend_tile_bwd(g3d_raster_ws *ws, int64_t tile, const float *d_rgb, 
             float dx = mx - px[p], dy = my - py[p];
             float power = -0.5f * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
             if (power > 0.0f) continue;
-            float G = expf(power);
+            float G = exp_nonpos(power);
             float al = o * G;
             int sat = al > ALPHA_MAX;
             if (sat) al = ALPHA_MAX;
