@@ -1,6 +1,7 @@
 /* ZIP reader: archives built here by a minimal writer (stored, deflated, ZIP64 fields),
  * then hostile variants of them. */
 #include "gen3d/zip.h"
+#include "gen3d/depthio.h"
 #include "testutil.h"
 
 #include <zlib.h>
@@ -194,6 +195,13 @@ TEST(hostile)
     CHECK_FAILS(g3d_zip_extract(&z, 0, 1u << 20, &out, &sz));
     g3d_zip_close(&z);
 
+    /* declared size larger than the stream inflates to */
+    memcpy(c.b, w.b, w.n);
+    c.b[cd + 24] = 0xff; c.b[cd + 25] = 0x0f;
+    CHECK_OK(g3d_zip_open(&z, c.b, c.n, "short.zip"));
+    CHECK_FAILS(g3d_zip_extract(&z, 0, 1u << 20, &out, &sz));
+    g3d_zip_close(&z);
+
     /* bomb guard: entry larger than the caller's limit */
     CHECK_OK(g3d_zip_open(&z, w.b, w.n, "bomb.zip"));
     CHECK_FAILS(g3d_zip_extract(&z, 0, 1000, &out, &sz));
@@ -215,10 +223,40 @@ TEST(hostile)
     free(w.b);
 }
 
+TEST(npz_members)
+{
+    /* An NPZ without arr_0: NULL picks the first member, names work with or without ".npy",
+     * an unknown name is reported. */
+    float v1[3] = {1.5f, -2.0f, 3.25f}, v2[2] = {7.0f, 8.0f};
+    int64_t s1[1] = {3}, s2[2] = {1, 2};
+    unsigned char *b1, *b2;
+    size_t n1, n2;
+    CHECK_OK(g3d_npy_save(test_tmp("m1.npy"), v1, 1, s1));
+    CHECK_OK(g3d_npy_save(test_tmp("m2.npy"), v2, 2, s2));
+    CHECK_OK(g3d_read_file(test_tmp("m1.npy"), 1 << 20, &b1, &n1));
+    CHECK_OK(g3d_read_file(test_tmp("m2.npy"), 1 << 20, &b2, &n2));
+    member_t m[2] = {{"first.npy", b1, n1, 8, 0}, {"second.npy", b2, n2, 0, 0}};
+    buf_t w = build_zip(m, 2);
+    CHECK_OK(g3d_write_file_atomic(test_tmp("two.npz"), w.b, w.n));
+    g3d_array a;
+    CHECK_OK(g3d_npz_load(test_tmp("two.npz"), NULL, &a));
+    CHECK(a.ndim == 1 && a.shape[0] == 3 && memcmp(a.data, v1, sizeof v1) == 0);
+    g3d_array_free(&a);
+    CHECK_OK(g3d_npz_load(test_tmp("two.npz"), "second", &a));
+    CHECK(a.ndim == 2 && a.shape[1] == 2 && memcmp(a.data, v2, sizeof v2) == 0);
+    g3d_array_free(&a);
+    CHECK_FAILS(g3d_npz_load(test_tmp("two.npz"), "third", &a));
+    CHECK(strstr(g3d_error_message(), "two.npz") && strstr(g3d_error_message(), "third"));
+    free(w.b);
+    free(b1);
+    free(b2);
+}
+
 int main(void)
 {
     RUN(stored_and_deflated);
     RUN(zip64_fields);
     RUN(hostile);
+    RUN(npz_members);
     return test_summary();
 }
