@@ -80,6 +80,19 @@ TEST(depth_round_trips)
     for (size_t i = 0; i < g3d_image_size(&d); i++) worst = fmax(worst, fabs(back.data[i] - d.data[i]));
     CHECK(worst <= 0.0005 + 1e-6);
     g3d_image_free(&back);
+    /* Big-endian PFM (positive scale) with rows stored bottom-to-top; inf and negative
+     * values become invalid (0) through g3d_depth_load but survive g3d_pfm_load. */
+    const unsigned char be_pfm[] = "Pf\n2 2\n1.0\n"
+                                   "\x3f\x80\x00\x00" "\x40\x00\x00\x00"  /* bottom row: 1, 2 */
+                                   "\x7f\x80\x00\x00" "\xc0\x40\x00\x00"; /* top row: inf, -3 */
+    write_bytes(test_tmp("be.pfm"), be_pfm, sizeof be_pfm - 1);
+    CHECK_OK(g3d_pfm_load(test_tmp("be.pfm"), &back));
+    CHECK(back.w == 2 && back.h == 2 && isinf(back.data[0]) && back.data[1] == -3.0f);
+    CHECK(back.data[2] == 1.0f && back.data[3] == 2.0f);
+    g3d_image_free(&back);
+    CHECK_OK(g3d_depth_load(test_tmp("be.pfm"), 0, &back));
+    CHECK(back.data[0] == 0 && back.data[1] == 0 && back.data[2] == 1.0f && back.data[3] == 2.0f);
+    g3d_image_free(&back);
     /* TUM scale 5000. */
     CHECK_OK(g3d_depth_load(test_tmp("depth.png"), 5000, &back));
     CHECK_NEAR(back.data[10], d.data[10] / 5.0, 0.0002);
