@@ -3,7 +3,7 @@
 # python3-skimage package) without installing Python: the package is downloaded from the
 # archive and only its three data files are unpacked.
 #   scripts/fetch-default-input.sh [DIR]      (default DIR: cache/default-input)
-# Prints DIR. Does nothing if the files are already there.
+# Prints DIR as an absolute path (a relative DIR is taken from the repository root). Does nothing if the files are already there.
 set -eu
 cd "$(dirname "$0")/.."
 dir=${1:-cache/default-input}
@@ -25,4 +25,4 @@ if [ $have = 0 ]; then
         cp "$src" "$dir/$f.part" && mv "$dir/$f.part" "$dir/$f"
     done
 fi
-echo "$dir"
+(cd "$dir" && pwd)

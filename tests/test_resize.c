@@ -78,9 +78,36 @@ TEST(properties)
     g3d_image_free(&a);
 }
 
+TEST(cubic_half_reproduces_quadratics)
+{
+    /* Keys' kernel reproduces quadratics exactly only for a = -0.5; a = -0.75 does not. Away
+     * from the replicated border, an upsampled x^2 ramp must equal x^2 at OpenCV's source
+     * coordinate src = (dst + 0.5) * in / out - 0.5. */
+    const int sw = 12, dw = 29;
+    g3d_image a, b, c2;
+    CHECK_OK(g3d_image_create(&a, sw, 1, 1));
+    for (int x = 0; x < sw; x++) a.data[x] = (float)(x * x) / 16.0f;
+    CHECK_OK(g3d_image_resize(&a, dw, 1, G3D_RESIZE_CUBIC_HALF, &b));
+    CHECK_OK(g3d_image_resize(&a, dw, 1, G3D_RESIZE_CUBIC_OPENCV, &c2));
+    double worst_half = 0, worst_opencv = 0;
+    for (int x = 0; x < dw; x++) {
+        double s = (x + 0.5) * sw / dw - 0.5;
+        if (s < 1 || s > sw - 3) continue;
+        worst_half = fmax(worst_half, fabs(b.data[x] - s * s / 16.0));
+        worst_opencv = fmax(worst_opencv, fabs(c2.data[x] - s * s / 16.0));
+    }
+    printf("  x^2 ramp: a=-0.5 max error %.2e, a=-0.75 max error %.2e\n", worst_half, worst_opencv);
+    CHECK(worst_half < 1e-5);
+    CHECK(worst_opencv > 1e-3);
+    g3d_image_free(&a);
+    g3d_image_free(&b);
+    g3d_image_free(&c2);
+}
+
 int main(void)
 {
     RUN(matches_opencv_and_pytorch);
     RUN(properties);
+    RUN(cubic_half_reproduces_quadratics);
     return test_summary();
 }

@@ -10,7 +10,7 @@
  *         (negative = little-endian); rows are stored bottom-to-top. Values are metres.
  *   .npy  NumPy array of shape (H, W) or (H, W, 1): float32, float16, float64 or uint16,
  *         either byte order, C order. Values are metres (uint16 is divided by `scale`).
- *   .npz  a zip of .npy members; `member` picks one (NULL = "arr_0" or the only one).
+ *   .npz  a zip of .npy members; `member` picks one (NULL = "arr_0", else the first).
  */
 #ifndef G3D_DEPTHIO_H
 #define G3D_DEPTHIO_H
@@ -33,7 +33,7 @@ void g3d_array_free(g3d_array *a);
 /* Parses an .npy file image held in memory (`label` names it in messages). */
 g3d_status g3d_npy_parse(const unsigned char *buf, size_t n, const char *label, g3d_array *out);
 g3d_status g3d_npy_load(const char *path, g3d_array *out);
-/* Reads one member of an .npz (member NULL: "arr_0", else the only member). The ".npy"
+/* Reads one member of an .npz (member NULL: "arr_0", else the first member). The ".npy"
  * suffix of member names is optional. */
 g3d_status g3d_npz_load(const char *path, const char *member, g3d_array *out);
 /* Writes a float32 array of the given shape as .npy (atomically). */

@@ -139,7 +139,7 @@ g3d_status g3d_npz_load(const char *path, const char *member, g3d_array *out)
         snprintf(name, sizeof name, "%s.npy", want);
         idx = g3d_zip_find(&z, name);
     }
-    if (idx < 0 && !member && z.n_entries == 1) idx = 0;
+    if (idx < 0 && !member && z.n_entries > 0) idx = 0; /* np.savez names its first array arr_0 */
     if (idx < 0) {
         rc = G3D_ERR(G3D_ERR_FORMAT, "%s: no array named '%s' in the archive (%lld members)", path, want, (long long)z.n_entries);
     } else {

@@ -1,17 +1,59 @@
-/* A read-only ZIP reader over a memory buffer, written for hostile input: every size and
- * offset is checked against the buffer before use. */
+/* Read-only ZIP reader: central directory (with ZIP64), stored and deflated entries.
+ * The archive is untrusted: every field is bounds-checked before use, the local header
+ * must repeat the central directory's name and method, and the CRC-32 is verified. */
 #include "gen3d/zip.h"
 
 #include <stdlib.h>
 #include <string.h>
 #include <zlib.h>
 
-static uint16_t rd16(const unsigned char *p) { return (uint16_t)(p[0] | p[1] << 8); }
-static uint32_t rd32(const unsigned char *p) { return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24; }
-static uint64_t rd64(const unsigned char *p) { return (uint64_t)rd32(p) | (uint64_t)rd32(p + 4) << 32; }
+static uint16_t rd16(const unsigned char *p) { return (uint16_t)(p[0] | (p[1] << 8)); }
+static uint32_t rd32(const unsigned char *p)
+{
+    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
+}
+static uint64_t rd64(const unsigned char *p) { return (uint64_t)rd32(p) | ((uint64_t)rd32(p + 4) << 32); }
 
-/* [off, off+len) lies inside [0, size). */
-static int in_bounds(uint64_t off, uint64_t len, uint64_t size) { return off <= size && len <= size - off; }
+/* 1 if [off, off+len) lies inside a buffer of n bytes (no overflow). */
+static int in_bounds(uint64_t off, uint64_t len, uint64_t n) { return off <= n && len <= n - off; }
+
+#define EOCD_SIG 0x06054b50u
+#define EOCD64_LOC_SIG 0x07064b50u
+#define EOCD64_SIG 0x06064b50u
+#define CDIR_SIG 0x02014b50u
+#define LOCAL_SIG 0x04034b50u
+
+/* Applies the ZIP64 extended-information extra field (id 1): it holds, in this order, only
+ * those of size / comp_size / local offset whose 32-bit fields are 0xffffffff. */
+static int apply_zip64(const unsigned char *extra, uint32_t extra_len, uint64_t *size,
+                       uint64_t *comp, uint64_t *loc)
+{
+    uint32_t p = 0;
+    int need = (*size == 0xffffffffu) + (*comp == 0xffffffffu) + (*loc == 0xffffffffu);
+    if (!need) return 1;
+    while (p + 4 <= extra_len) {
+        uint16_t id = rd16(extra + p), len = rd16(extra + p + 2);
+        const unsigned char *f = extra + p + 4;
+        uint32_t q = 0;
+        if (p + 4 + (uint32_t)len > extra_len) return 0;
+        if (id == 1) {
+            if (*size == 0xffffffffu) { if (q + 8 > len) return 0; *size = rd64(f + q); q += 8; }
+            if (*comp == 0xffffffffu) { if (q + 8 > len) return 0; *comp = rd64(f + q); q += 8; }
+            if (*loc == 0xffffffffu) { if (q + 8 > len) return 0; *loc = rd64(f + q); q += 8; }
+            return 1;
+        }
+        p += 4 + (uint32_t)len;
+    }
+    return 0;
+}
+
+static char *dup_str(const char *s)
+{
+    size_t n = strlen(s) + 1;
+    char *d = malloc(n);
+    if (d) memcpy(d, s, n);
+    return d;
+}
 
 void g3d_zip_close(g3d_zip *zip)
 {
@@ -22,171 +64,212 @@ void g3d_zip_close(g3d_zip *zip)
     memset(zip, 0, sizeof *zip);
 }
 
-/* Finds the end-of-central-directory record: the last signature within the final 64 KiB + 22. */
-static int64_t find_eocd(const unsigned char *d, uint64_t n)
-{
-    if (n < 22) return -1;
-    uint64_t lo = n > 22 + 65535 ? n - 22 - 65535 : 0;
-    for (uint64_t i = n - 22 + 1; i-- > lo;)
-        if (rd32(d + i) == 0x06054b50 && i + 22 + rd16(d + i + 20) == n) return (int64_t)i;
-    return -1;
-}
-
-static g3d_status parse(g3d_zip *z)
-{
-    const unsigned char *d = z->data;
-    uint64_t n = z->data_size;
-    const char *L = z->label;
-    int64_t eocd = find_eocd(d, n);
-    if (eocd < 0) return G3D_ERR(G3D_ERR_FORMAT, "%s: not a zip archive (no end-of-directory record)", L);
-    uint64_t count = rd16(d + eocd + 10), cd_size = rd32(d + eocd + 12), cd_off = rd32(d + eocd + 16);
-
-    if (count == 0xffff || cd_size == 0xffffffffu || cd_off == 0xffffffffu) {
-        /* ZIP64: the locator sits just before the EOCD and points at the ZIP64 record. */
-        if (eocd < 20 || rd32(d + eocd - 20) != 0x07064b50)
-            return G3D_ERR(G3D_ERR_FORMAT, "%s: zip64 archive without a locator", L);
-        uint64_t rec = rd64(d + eocd - 20 + 8);
-        if (!in_bounds(rec, 56, n) || rd32(d + rec) != 0x06064b50)
-            return G3D_ERR(G3D_ERR_FORMAT, "%s: bad zip64 end-of-directory record", L);
-        count = rd64(d + rec + 32);
-        cd_size = rd64(d + rec + 40);
-        cd_off = rd64(d + rec + 48);
-    }
-    if (!in_bounds(cd_off, cd_size, n)) return G3D_ERR(G3D_ERR_FORMAT, "%s: central directory lies outside the file", L);
-    /* Each directory record is at least 46 bytes, so a count above cd_size/46 is a lie. */
-    if (count > cd_size / 46) return G3D_ERR(G3D_ERR_FORMAT, "%s: central directory claims %llu entries in %llu bytes", L,
-                                             (unsigned long long)count, (unsigned long long)cd_size);
-    z->entries = g3d_calloc(count ? count : 1, sizeof *z->entries, "zip directory");
-    if (!z->entries) return G3D_ERR_NOMEM;
-
-    uint64_t p = cd_off, end = cd_off + cd_size;
-    for (uint64_t i = 0; i < count; i++) {
-        g3d_zip_entry *e = &z->entries[i];
-        if (!in_bounds(p, 46, end) || rd32(d + p) != 0x02014b50)
-            return G3D_ERR(G3D_ERR_FORMAT, "%s: corrupt central directory record %llu", L, (unsigned long long)i);
-        uint16_t flags = rd16(d + p + 8), nlen = rd16(d + p + 28), xlen = rd16(d + p + 30), clen = rd16(d + p + 32);
-        uint64_t csize = rd32(d + p + 20), usize = rd32(d + p + 24), loff = rd32(d + p + 42);
-        e->method = rd16(d + p + 10);
-        e->crc32 = rd32(d + p + 16);
-        if (!in_bounds(p + 46, (uint64_t)nlen + xlen + clen, end))
-            return G3D_ERR(G3D_ERR_FORMAT, "%s: directory record %llu runs past the directory", L, (unsigned long long)i);
-        if (flags & 1) return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: encrypted zip entries are not supported", L);
-        e->name = malloc((size_t)nlen + 1);
-        if (!e->name) return G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", L);
-        memcpy(e->name, d + p + 46, nlen);
-        e->name[nlen] = 0;
-        z->n_entries = (int64_t)i + 1;
-        /* ZIP64 extra field: the 64-bit values appear in order, only for fields set to 0xffffffff. */
-        for (uint64_t x = p + 46 + nlen, xe = x + xlen; x + 4 <= xe;) {
-            uint16_t id = rd16(d + x), sz = rd16(d + x + 2);
-            if (x + 4 + sz > xe) break;
-            if (id == 0x0001) {
-                uint64_t q = x + 4, qe = q + sz;
-                if (usize == 0xffffffffu) { if (q + 8 > qe) break; usize = rd64(d + q); q += 8; }
-                if (csize == 0xffffffffu) { if (q + 8 > qe) break; csize = rd64(d + q); q += 8; }
-                if (loff == 0xffffffffu) { if (q + 8 > qe) break; loff = rd64(d + q); }
-            }
-            x += 4 + (uint64_t)sz;
-        }
-        /* The local header repeats name and extra lengths; the data follows them. */
-        if (!in_bounds(loff, 30, n) || rd32(d + loff) != 0x04034b50)
-            return G3D_ERR(G3D_ERR_FORMAT, "%s: entry '%s' has a bad local header", L, e->name);
-        uint16_t lnlen = rd16(d + loff + 26), lxlen = rd16(d + loff + 28);
-        if (lnlen != nlen || !in_bounds(loff + 30, nlen, n) || memcmp(d + loff + 30, e->name, nlen) != 0)
-            return G3D_ERR(G3D_ERR_FORMAT, "%s: entry '%s': local header disagrees with the directory", L, e->name);
-        if (rd16(d + loff + 8) != e->method)
-            return G3D_ERR(G3D_ERR_FORMAT, "%s: entry '%s': local header disagrees with the directory", L, e->name);
-        e->offset = loff + 30 + (uint64_t)lnlen + lxlen;
-        e->comp_size = csize;
-        e->size = usize;
-        if (!in_bounds(e->offset, csize, n))
-            return G3D_ERR(G3D_ERR_FORMAT, "%s: entry '%s' extends past the end of the file (truncated?)", L, e->name);
-        if (e->method != 0 && e->method != 8)
-            return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: entry '%s' uses compression method %d (only stored and deflate)", L,
-                           e->name, e->method);
-        if (e->method == 0 && csize != usize)
-            return G3D_ERR(G3D_ERR_FORMAT, "%s: stored entry '%s' has different packed and unpacked sizes", L, e->name);
-        p += 46 + (uint64_t)nlen + xlen + clen;
-    }
-    return G3D_OK;
-}
-
 g3d_status g3d_zip_open(g3d_zip *zip, const unsigned char *data, uint64_t n, const char *label)
 {
+    uint64_t eocd = 0, cd_off, cd_size, count, p;
+    int found = 0;
+    const char *L = label ? label : "zip";
+    g3d_status rc = G3D_OK;
+
     memset(zip, 0, sizeof *zip);
+    if (n < 22) return G3D_ERR(G3D_ERR_FORMAT, "%s: not a zip archive (too short, %llu bytes)", L, (unsigned long long)n);
+    /* The end record sits in the last 22 + 65535 (comment) bytes; search backwards. */
+    for (uint64_t i = n - 22;; i--) {
+        if (rd32(data + i) == EOCD_SIG && i + 22 + rd16(data + i + 20) == n) { eocd = i; found = 1; break; }
+        if (i == 0 || n - i > 22 + 65535) break;
+    }
+    if (!found) return G3D_ERR(G3D_ERR_FORMAT, "%s: not a zip archive (no end of central directory record)", L);
+    count = rd16(data + eocd + 10);
+    cd_size = rd32(data + eocd + 12);
+    cd_off = rd32(data + eocd + 16);
+    if (count == 0xffff || cd_size == 0xffffffffu || cd_off == 0xffffffffu) {
+        uint64_t loc, e64;
+        if (eocd < 20 || rd32(data + eocd - 20) != EOCD64_LOC_SIG)
+            return G3D_ERR(G3D_ERR_FORMAT, "%s: ZIP64 end of central directory locator missing", L);
+        loc = eocd - 20;
+        e64 = rd64(data + loc + 8);
+        if (!in_bounds(e64, 56, loc) || rd32(data + e64) != EOCD64_SIG)
+            return G3D_ERR(G3D_ERR_FORMAT, "%s: ZIP64 end of central directory record out of bounds or corrupt", L);
+        count = rd64(data + e64 + 32);
+        cd_size = rd64(data + e64 + 40);
+        cd_off = rd64(data + e64 + 48);
+    }
+    if (!in_bounds(cd_off, cd_size, n))
+        return G3D_ERR(G3D_ERR_FORMAT, "%s: central directory (offset %llu, %llu bytes) lies past the end of the file (%llu bytes)",
+                       L, (unsigned long long)cd_off, (unsigned long long)cd_size, (unsigned long long)n);
+    /* Each record takes at least 46 bytes, which also bounds the allocation. */
+    if (count > cd_size / 46)
+        return G3D_ERR(G3D_ERR_FORMAT, "%s: central directory claims %llu entries in %llu bytes", L,
+                       (unsigned long long)count, (unsigned long long)cd_size);
     zip->data = data;
     zip->data_size = n;
-    zip->label = malloc(strlen(label) + 1);
-    if (!zip->label) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
-    strcpy(zip->label, label);
-    g3d_status rc = parse(zip);
-    if (rc != G3D_OK) g3d_zip_close(zip);
+    zip->label = dup_str(L);
+    zip->entries = count ? calloc((size_t)count, sizeof *zip->entries) : NULL;
+    if (!zip->label || (count && !zip->entries)) { g3d_zip_close(zip); return G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", L); }
+
+    p = cd_off;
+    for (uint64_t i = 0; i < count; i++) {
+        const unsigned char *c = data + p, *lh;
+        g3d_zip_entry *e = &zip->entries[i];
+        uint32_t name_len, extra_len, comment_len, lname, lextra;
+        uint64_t loc, data_off;
+        uint16_t flags;
+        if (!in_bounds(p, 46, cd_off + cd_size) || rd32(c) != CDIR_SIG) {
+            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: central directory entry %llu is corrupt", L, (unsigned long long)i);
+            goto fail;
+        }
+        flags = rd16(c + 8);
+        e->method = rd16(c + 10);
+        e->crc32 = rd32(c + 16);
+        e->comp_size = rd32(c + 20);
+        e->size = rd32(c + 24);
+        name_len = rd16(c + 28);
+        extra_len = rd16(c + 30);
+        comment_len = rd16(c + 32);
+        loc = rd32(c + 42);
+        if (!in_bounds(p + 46, (uint64_t)name_len + extra_len + comment_len, cd_off + cd_size)) {
+            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: central directory entry %llu runs past the directory", L, (unsigned long long)i);
+            goto fail;
+        }
+        e->name = malloc(name_len + 1u);
+        if (!e->name) { rc = G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", L); goto fail; }
+        memcpy(e->name, c + 46, name_len);
+        e->name[name_len] = 0;
+        zip->n_entries = (int64_t)i + 1;
+        if (memchr(e->name, 0, name_len)) {
+            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: entry %llu has a NUL byte in its name", L, (unsigned long long)i);
+            goto fail;
+        }
+        if (!apply_zip64(c + 46 + name_len, extra_len, &e->size, &e->comp_size, &loc)) {
+            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: %s: ZIP64 extra field missing or truncated", L, e->name);
+            goto fail;
+        }
+        if (flags & 1) { rc = G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: %s: encrypted entries are not supported", L, e->name); goto fail; }
+        if (e->method != 0 && e->method != 8) {
+            rc = G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: %s: compression method %d not supported (stored or deflate only)", L, e->name, e->method);
+            goto fail;
+        }
+        if (e->method == 0 && e->comp_size != e->size) {
+            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: %s: stored entry with compressed size %llu != size %llu", L, e->name,
+                         (unsigned long long)e->comp_size, (unsigned long long)e->size);
+            goto fail;
+        }
+        /* The local header must repeat the name and method; its sizes may be deferred to a
+         * data descriptor (flag bit 3), so the central directory's sizes are authoritative. */
+        if (!in_bounds(loc, 30, n) || rd32(data + loc) != LOCAL_SIG) {
+            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: %s: local header at offset %llu is missing or out of bounds", L, e->name, (unsigned long long)loc);
+            goto fail;
+        }
+        lh = data + loc;
+        lname = rd16(lh + 26);
+        lextra = rd16(lh + 28);
+        if (rd16(lh + 8) != e->method || lname != name_len || !in_bounds(loc + 30, lname, n) || memcmp(lh + 30, e->name, name_len) != 0) {
+            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: %s: local header disagrees with the central directory", L, e->name);
+            goto fail;
+        }
+        if (!(rd16(lh + 6) & 8) && rd32(lh + 14) != e->crc32) {
+            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: %s: local header CRC disagrees with the central directory", L, e->name);
+            goto fail;
+        }
+        data_off = loc + 30 + lname + lextra;
+        if (!in_bounds(data_off, e->comp_size, n)) {
+            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: %s: data (%llu bytes at offset %llu) runs past the end of the file (%llu bytes)",
+                         L, e->name, (unsigned long long)e->comp_size, (unsigned long long)data_off, (unsigned long long)n);
+            goto fail;
+        }
+        e->offset = data_off;
+        p += 46 + (uint64_t)name_len + extra_len + comment_len;
+    }
+    return G3D_OK;
+fail:
+    g3d_zip_close(zip);
     return rc;
 }
 
 int64_t g3d_zip_find(const g3d_zip *zip, const char *name)
 {
     for (int64_t i = 0; i < zip->n_entries; i++)
-        if (!strcmp(zip->entries[i].name, name)) return i;
+        if (strcmp(zip->entries[i].name, name) == 0) return i;
     return -1;
+}
+
+/* zlib's crc32 takes uInt lengths; feed large buffers in pieces. */
+static uint32_t crc_of(const unsigned char *p, uint64_t n)
+{
+    uLong crc = crc32(0L, Z_NULL, 0);
+    while (n) {
+        uInt k = n > 0x40000000u ? 0x40000000u : (uInt)n;
+        crc = crc32(crc, p, k);
+        p += k;
+        n -= k;
+    }
+    return (uint32_t)crc;
 }
 
 const unsigned char *g3d_zip_stored_data(const g3d_zip *zip, int64_t i)
 {
+    const g3d_zip_entry *e;
     if (i < 0 || i >= zip->n_entries) { G3D_ERR(G3D_ERR_ARG, "%s: no entry %lld", zip->label, (long long)i); return NULL; }
-    const g3d_zip_entry *e = &zip->entries[i];
-    if (e->method != 0) {
-        G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: entry '%s' is compressed", zip->label, e->name);
+    e = &zip->entries[i];
+    if (e->method != 0) { G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: %s: entry is compressed", zip->label, e->name); return NULL; }
+    if (!in_bounds(e->offset, e->size, zip->data_size)) {
+        G3D_ERR(G3D_ERR_FORMAT, "%s: %s: data runs past the end of the file", zip->label, e->name);
         return NULL;
     }
     return zip->data + e->offset;
 }
 
-g3d_status g3d_zip_extract(const g3d_zip *zip, int64_t i, uint64_t max_entry_bytes, unsigned char **out, uint64_t *out_size)
+g3d_status g3d_zip_extract(const g3d_zip *zip, int64_t i, uint64_t max_entry_bytes,
+                           unsigned char **out, uint64_t *out_size)
 {
+    const g3d_zip_entry *e;
+    unsigned char *buf;
     if (i < 0 || i >= zip->n_entries) return G3D_ERR(G3D_ERR_ARG, "%s: no entry %lld", zip->label, (long long)i);
-    const g3d_zip_entry *e = &zip->entries[i];
+    e = &zip->entries[i];
     if (e->size > max_entry_bytes)
-        return G3D_ERR(G3D_ERR_FORMAT, "%s: entry '%s' claims %llu bytes, above the limit of %llu", zip->label, e->name,
+        return G3D_ERR(G3D_ERR_FORMAT, "%s: %s: entry of %llu bytes exceeds the limit of %llu bytes", zip->label, e->name,
                        (unsigned long long)e->size, (unsigned long long)max_entry_bytes);
-    unsigned char *buf = malloc(e->size ? (size_t)e->size : 1);
-    if (!buf) return G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory for entry '%s'", zip->label, e->name);
+    if (e->size > (uint64_t)SIZE_MAX - 1 || !in_bounds(e->offset, e->comp_size, zip->data_size))
+        return G3D_ERR(G3D_ERR_FORMAT, "%s: %s: entry out of bounds", zip->label, e->name);
+    buf = malloc((size_t)e->size + 1);
+    if (!buf) return G3D_ERR(G3D_ERR_NOMEM, "%s: %s: out of memory (%llu bytes)", zip->label, e->name, (unsigned long long)e->size);
     if (e->method == 0) {
         memcpy(buf, zip->data + e->offset, (size_t)e->size);
     } else {
-        z_stream s;
-        memset(&s, 0, sizeof s);
-        if (inflateInit2(&s, -MAX_WBITS) != Z_OK) { free(buf); return G3D_ERR(G3D_ERR_INTERNAL, "zlib init failed"); }
-        /* Feed in chunks that fit zlib's 32-bit counters; never write past e->size. */
-        const unsigned char *src = zip->data + e->offset;
-        uint64_t in_left = e->comp_size, out_done = 0;
+        /* Inflate at most e->size bytes; a stream that wants more, or ends early, is corrupt. */
+        z_stream zs;
         int zr = Z_OK;
+        uint64_t in_left = e->comp_size, out_done = 0;
+        const unsigned char *in = zip->data + e->offset;
+        memset(&zs, 0, sizeof zs);
+        if (inflateInit2(&zs, -MAX_WBITS) != Z_OK) { free(buf); return G3D_ERR(G3D_ERR_NOMEM, "%s: zlib init failed", zip->label); }
         while (zr == Z_OK) {
-            uInt in_chunk = in_left > 0x40000000u ? 0x40000000u : (uInt)in_left;
-            uint64_t out_left = e->size - out_done;
-            uInt out_chunk = out_left > 0x40000000u ? 0x40000000u : (uInt)out_left;
-            s.next_in = (Bytef *)src;
-            s.avail_in = in_chunk;
-            s.next_out = buf + out_done;
-            s.avail_out = out_chunk;
-            zr = inflate(&s, Z_NO_FLUSH);
-            src += in_chunk - s.avail_in;
-            in_left -= in_chunk - s.avail_in;
-            out_done += out_chunk - s.avail_out;
-            if (zr == Z_OK && s.avail_out == out_chunk && s.avail_in == in_chunk) zr = Z_BUF_ERROR; /* no progress */
-            if (zr == Z_BUF_ERROR && out_done == e->size && out_chunk == 0) zr = Z_DATA_ERROR; /* more output than declared */
+            uInt ic = in_left > 0x40000000u ? 0x40000000u : (uInt)in_left;
+            uint64_t room = e->size + 1 - out_done; /* one spare byte detects overlong streams */
+            uInt oc = room > 0x40000000u ? 0x40000000u : (uInt)room;
+            zs.next_in = (Bytef *)in;
+            zs.avail_in = ic;
+            zs.next_out = buf + out_done;
+            zs.avail_out = oc;
+            zr = inflate(&zs, Z_NO_FLUSH);
+            in += ic - zs.avail_in;
+            in_left -= ic - zs.avail_in;
+            out_done += oc - zs.avail_out;
+            if (zr == Z_BUF_ERROR && (in_left == 0 || out_done > e->size)) break;
+            if (zr == Z_BUF_ERROR) zr = Z_OK;
         }
-        inflateEnd(&s);
+        inflateEnd(&zs);
         if (zr != Z_STREAM_END || out_done != e->size) {
             free(buf);
-            return G3D_ERR(G3D_ERR_FORMAT, "%s: entry '%s' does not decompress to its declared %llu bytes", zip->label,
-                           e->name, (unsigned long long)e->size);
+            return G3D_ERR(G3D_ERR_FORMAT, "%s: %s: corrupt deflate data (%s)", zip->label, e->name,
+                           zr == Z_STREAM_END ? "size disagrees with the directory" : "stream error or truncated");
         }
     }
-    if ((uint32_t)crc32_z(crc32(0L, Z_NULL, 0), buf, (z_size_t)e->size) != e->crc32) {
+    if (crc_of(buf, e->size) != e->crc32) {
         free(buf);
-        return G3D_ERR(G3D_ERR_FORMAT, "%s: entry '%s' fails its CRC check (corrupt)", zip->label, e->name);
+        return G3D_ERR(G3D_ERR_FORMAT, "%s: %s: CRC-32 mismatch (corrupt data)", zip->label, e->name);
     }
+    buf[e->size] = 0;
     *out = buf;
     *out_size = e->size;
     return G3D_OK;
