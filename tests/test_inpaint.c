@@ -69,8 +69,9 @@ static void known_answer(int kind, int border)
     printf("       texture %d %s: MAE patchmatch %.4f, diffusion %.4f\n", kind, border ? "border" : "centre", e_pm,
            e_df);
     /* A periodic texture is fully explained by its known part: the exemplar fill must be far
-     * better than the smooth fill, which sits at about half the contrast everywhere. */
-    CHECK_MSG(e_pm < 0.25 * e_df, "MAE %.4f vs diffusion %.4f", e_pm, e_df);
+     * better (over 3x) than the smooth fill, which sits at about half the contrast everywhere;
+     * bricks allow a phase-shifted but equally plausible course, hence not ~0 error. */
+    CHECK_MSG(e_pm < 0.3 * e_df, "MAE %.4f vs diffusion %.4f", e_pm, e_df);
     CHECK(e_pm < 0.05);
     CHECK(outside_identical(&pm, &truth, &m));
     CHECK(outside_identical(&df, &truth, &m));
@@ -127,8 +128,8 @@ TEST(photo_border_band)
     CHECK(load_photo(test_shared("testdata/nyu_v2_metric3d/rgb/rgb_00050.jpg"), 4, &truth));
     if (!truth.data) return;
     CHECK_OK(g3d_image_create(&m, truth.w, truth.h, 1));
-    int band = truth.w * 3 / 10;
-    mask_rect(&m, 0, 0, band, truth.h); /* newly seen band along the left side */
+    int band = truth.h * 3 / 10;
+    mask_rect(&m, 0, truth.h - band, truth.w, truth.h); /* newly seen band along the bottom */
     CHECK_OK(g3d_image_clone(&pm, &truth));
     CHECK_OK(g3d_image_clone(&df, &truth));
     CHECK_OK(g3d_inpaint_patchmatch(&pm, &m, NULL, 1));
@@ -138,8 +139,9 @@ TEST(photo_border_band)
            band, g_true, g_pm, g_df);
     /* A smear or blur keeps only a small fraction of the texture energy (the diffusion fill
      * shows by how much); an exemplar fill copies real texture so it stays near the truth. */
-    CHECK(g_pm > 0.6 * g_true && g_pm < 1.6 * g_true);
-    CHECK(g_df < 0.3 * g_true);
+    CHECK(g_pm > 0.5 * g_true && g_pm < 1.6 * g_true);
+    CHECK(g_df < 0.2 * g_true);
+    CHECK(g_pm > 4.0 * g_df);
     CHECK(outside_identical(&pm, &truth, &m));
     g3d_image_free(&truth);
     g3d_image_free(&pm);
