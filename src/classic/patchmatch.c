@@ -154,11 +154,91 @@ static g3d_status level_from_image(level *L, const g3d_image *image, const g3d_i
     return G3D_OK;
 }
 
-static void level_to_image(const level *L, g3d_image *image)
+static void level_to_image(const level *L, g3d_image *image, const g3d_image *mask)
 {
     size_t n = (size_t)L->w * L->h;
     for (size_t i = 0; i < n; i++)
-        if (L->hole[i]) memcpy(image->data + i * L->c, L->img + i * L->c, (size_t)L->c * sizeof(float));
+        if (mask->data[i] > 0.5f) memcpy(image->data + i * L->c, L->img + i * L->c, (size_t)L->c * sizeof(float));
+}
+
+
+/* Cheap path for tiny holes (4-connected components of at most `max_px` pixels): a smooth
+ * fill is indistinguishable there, and afterwards they count as known. This matters for the
+ * speckled disocclusions of a reprojection, which would otherwise leave almost no hole-free
+ * source patch. A tiny component's 4-neighbours are all known, so the sweeps read only
+ * known values; the start is the mean of those neighbours. */
+static g3d_status fill_tiny_holes(level *L, int max_px)
+{
+    const int w = L->w, h = L->h, c = L->c;
+    const size_t n = (size_t)w * h;
+    int32_t *stack = malloc(n * sizeof *stack), *comp = malloc(n * sizeof *comp);
+    uint8_t *seen = g3d_calloc(n, 1, "inpaint components");
+    level T = {0};
+    g3d_status rc = G3D_OK;
+    if (!stack || !comp || !seen) {
+        rc = G3D_ERR(G3D_ERR_NOMEM, "inpaint: out of memory for hole components");
+        goto out;
+    }
+    T.w = w;
+    T.h = h;
+    T.c = c;
+    T.img = L->img;
+    T.hole = g3d_calloc(n, 1, "inpaint components");
+    if (!T.hole) {
+        rc = G3D_ERR_NOMEM;
+        goto out;
+    }
+    size_t n_tiny = 0;
+    for (size_t s0 = 0; s0 < n; s0++) {
+        if (!L->hole[s0] || seen[s0]) continue;
+        size_t ns = 0, nc = 0;
+        stack[ns++] = (int32_t)s0;
+        seen[s0] = 1;
+        while (ns) {
+            int32_t i = stack[--ns];
+            comp[nc++] = i;
+            int x = i % w, y = i / w;
+            const int nx[4] = {x - 1, x + 1, x, x}, ny[4] = {y, y, y - 1, y + 1};
+            for (int k = 0; k < 4; k++) {
+                if (nx[k] < 0 || ny[k] < 0 || nx[k] >= w || ny[k] >= h) continue;
+                size_t j = (size_t)ny[k] * w + nx[k];
+                if (L->hole[j] && !seen[j]) {
+                    seen[j] = 1;
+                    stack[ns++] = (int32_t)j;
+                }
+            }
+        }
+        if (nc > (size_t)max_px) continue;
+        float sum[16] = {0};
+        int cnt = 0;
+        for (size_t k = 0; k < nc; k++) {
+            int x = comp[k] % w, y = comp[k] / w;
+            const int nx[4] = {x - 1, x + 1, x, x}, ny[4] = {y, y, y - 1, y + 1};
+            for (int q = 0; q < 4; q++) {
+                if (nx[q] < 0 || ny[q] < 0 || nx[q] >= w || ny[q] >= h) continue;
+                size_t j = (size_t)ny[q] * w + nx[q];
+                if (L->hole[j]) continue;
+                for (int ch = 0; ch < c; ch++) sum[ch] += L->img[j * c + ch];
+                cnt++;
+            }
+        }
+        for (size_t k = 0; k < nc; k++) {
+            for (int ch = 0; ch < c; ch++) L->img[(size_t)comp[k] * c + ch] = cnt ? sum[ch] / (float)cnt : 0.f;
+            T.hole[comp[k]] = 1;
+        }
+        n_tiny += nc;
+    }
+    if (n_tiny) {
+        laplace_sweeps(&T, 2 * max_px);
+        for (size_t i = 0; i < n; i++)
+            if (T.hole[i]) L->hole[i] = 0;
+    }
+out:
+    free(T.hole);
+    free(stack);
+    free(comp);
+    free(seen);
+    return rc;
 }
 
 g3d_status g3d_inpaint_diffusion(g3d_image *image, const g3d_image *mask)
@@ -169,7 +249,7 @@ g3d_status g3d_inpaint_diffusion(g3d_image *image, const g3d_image *mask)
     level L = {0};
     G3D_TRY(level_from_image(&L, image, mask));
     g3d_status rc = diffuse_level(&L);
-    if (rc == G3D_OK) level_to_image(&L, image);
+    if (rc == G3D_OK) level_to_image(&L, image, mask);
     level_free(&L);
     return rc;
 }
@@ -408,7 +488,7 @@ static void nnf_init(const level *L, nnf *f, const level *C, const nnf *fc, g3d_
  * each pixel taking the centre of the source patch that best matches the pixels known before
  * that layer. Unlike a smooth start, this gives wide border bands real texture for the EM
  * iterations to refine (a smooth start makes the search prefer flat source patches). The
- * search is exhaustive over at most ~4096 sources drawn with the scale's rng. */
+ * search is exhaustive over a subset of the sources drawn with the scale's rng. */
 static g3d_status onion_init(level *L, const nnf *f, g3d_rng *rng)
 {
     const int w = L->w, h = L->h, c = L->c, r = f->r;
@@ -421,15 +501,20 @@ static g3d_status onion_init(level *L, const nnf *f, g3d_rng *rng)
         free(cand);
         return G3D_ERR(G3D_ERR_NOMEM, "inpaint: out of memory for the coarse start");
     }
-    size_t nc = 0;
-    const size_t max_c = 4096;
-    for (size_t k = 0; k < f->n_src; k++)
-        if (f->n_src <= max_c || g3d_rng_below(rng, (uint32_t)f->n_src) < max_c) cand[nc++] = f->src_list[k];
     size_t left = 0;
     for (size_t i = 0; i < n; i++) {
         known[i] = !L->hole[i];
         left += L->hole[i];
     }
+    /* Bounded work: at most ~4e6 patch comparisons, so a coarsest scale that stayed large
+     * (speckled masks stop the pyramid early) cannot blow up; at least 16 candidates. */
+    size_t max_c = 4000000 / (left ? left : 1);
+    if (max_c > 4096) max_c = 4096;
+    if (max_c < 16) max_c = 16;
+    size_t nc = 0;
+    for (size_t k = 0; k < f->n_src; k++)
+        if (f->n_src <= max_c || g3d_rng_below(rng, (uint32_t)f->n_src) < max_c) cand[nc++] = f->src_list[k];
+    if (!nc) cand[nc++] = f->src_list[0];
     while (left) {
         memcpy(next, known, n);
         for (int y = 0; y < h; y++)
@@ -523,6 +608,13 @@ g3d_status g3d_inpaint_patchmatch(g3d_image *image, const g3d_image *mask, const
     g3d_status rc = level_from_image(&lv[0], image, mask);
     if (rc != G3D_OK) return rc;
 
+    rc = fill_tiny_holes(&lv[0], (r + 1) * (r + 1));
+    if (rc != G3D_OK) goto done;
+    {
+        size_t left = 0;
+        for (size_t i = 0; i < (size_t)lv[0].w * lv[0].h; i++) left += lv[0].hole[i];
+        if (!left) goto done;
+    }
     if (count_sources(&lv[0], r) == 0) {
         /* Too small or too holey for a single full patch: a smooth fill is the best we can do. */
         rc = diffuse_level(&lv[0]);
@@ -559,7 +651,7 @@ g3d_status g3d_inpaint_patchmatch(g3d_image *image, const g3d_image *mask, const
         if (rc != G3D_OK) goto done;
     }
 done:
-    if (rc == G3D_OK) level_to_image(&lv[0], image);
+    if (rc == G3D_OK) level_to_image(&lv[0], image, mask);
     for (int l = 0; l < MAX_LEVELS; l++) level_free(&lv[l]);
     nnf_free(&fields[0]);
     nnf_free(&fields[1]);
