@@ -21,7 +21,7 @@ typedef struct g3d_inpaint_params {
     int patch;        /* patch side in pixels, odd, 3..15 (default 7)                     */
     int em_iters;     /* search + vote iterations per scale (default 4)                    */
     int pm_passes;    /* PatchMatch propagation/random-search passes per iteration (2)     */
-    int coarse_side;  /* stop building the pyramid below this shorter side (default 32)    */
+    int coarse_side;  /* stop building the pyramid below this shorter side (default 48)    */
 } g3d_inpaint_params;
 
 /* Fills p with the defaults above. */

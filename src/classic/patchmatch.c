@@ -262,7 +262,7 @@ void g3d_inpaint_params_default(g3d_inpaint_params *p)
     p->patch = 7;
     p->em_iters = 4;
     p->pm_passes = 2;
-    p->coarse_side = 32;
+    p->coarse_side = 48;
 }
 
 /* Per-scale state of the nearest-neighbour field. */
@@ -624,7 +624,9 @@ g3d_status g3d_inpaint_patchmatch(g3d_image *image, const g3d_image *mask, const
     while (nl < MAX_LEVELS) {
         const level *F = &lv[nl - 1];
         int mside = F->w < F->h ? F->w : F->h;
-        if (mside / 2 < p.coarse_side) break;
+        /* At least one halving when possible: the onion start drifts on fine, regular
+         * texture, and a coarse start fixes the layout before the details are copied. */
+        if (mside / 2 < (nl == 1 ? 16 : p.coarse_side)) break;
         rc = level_down(F, &lv[nl], 1);
         if (rc != G3D_OK) goto done;
         if (count_sources(&lv[nl], r) < 64) {
