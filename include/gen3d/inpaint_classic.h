@@ -1,6 +1,6 @@
 /* gen3d/inpaint_classic.h - weight-free inpainting: multi-scale exemplar-based hole filling
  * (PatchMatch nearest-neighbour search + patch voting, coarse to fine) and a smooth
- * diffusion fill used to start the coarsest scale and as a baseline.
+ * diffusion fill used for tiny holes and as a baseline.
  *
  * Images are g3d_image (h, w, c), row-major, channels interleaved, any c in 1..16.
  * Masks are (h, w, 1); a pixel is a hole where mask > 0.5. Pixels outside the hole are

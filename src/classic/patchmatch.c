@@ -5,7 +5,7 @@
  * hundreds of pixels wide, so the field is found at a coarse scale first and upsampled; each
  * scale then only refines it. Why the coarse pyramid marks a pixel as hole when ANY of its
  * children is one: a known coarse pixel must never mix in unknown colour, otherwise source
- * patches at coarse scales would copy the smooth starting guess.
+ * patches at coarse scales would copy the starting guess instead of real content.
  *
  * Determinism: every pass is sequential in a fixed scan order and the random search draws
  * from one g3d_rng per scale seeded from (seed, scale); votes are summed in a fixed order.
