@@ -26,6 +26,8 @@ typedef struct g3d_inpaint_params {
 
 /* Fills p with the defaults above. */
 void g3d_inpaint_params_default(g3d_inpaint_params *p);
+/* Writes the parameters as one line to the log at INFO level. */
+void g3d_inpaint_params_print(const g3d_inpaint_params *p);
 
 /* Exemplar-based fill of image where mask > 0.5, using only patches lying wholly in the
  * known region as sources. image: (h, w, c), modified in place inside the hole only.

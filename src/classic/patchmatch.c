@@ -265,6 +265,12 @@ void g3d_inpaint_params_default(g3d_inpaint_params *p)
     p->coarse_side = 48;
 }
 
+void g3d_inpaint_params_print(const g3d_inpaint_params *p)
+{
+    g3d_log(G3D_LOG_INFO, "inpaint: patch %d, %d EM iterations x %d PatchMatch passes, coarse side %d", p->patch,
+            p->em_iters, p->pm_passes, p->coarse_side);
+}
+
 /* Per-scale state of the nearest-neighbour field. */
 typedef struct nnf {
     int r;             /* patch radius */
@@ -678,6 +684,7 @@ g3d_status g3d_inpainter_classic_create(const g3d_inpaint_params *params, g3d_in
     if (!ctx) return G3D_ERR_NOMEM;
     if (params) *ctx = *params;
     else g3d_inpaint_params_default(ctx);
+    g3d_inpaint_params_print(ctx);
     out->name = "classic";
     out->ctx = ctx;
     out->inpaint = classic_inpaint;
