@@ -250,6 +250,8 @@ TEST(provider_and_errors)
     p.patch = 6;
     m.data[0] = 0.f;
     CHECK_FAILS(g3d_inpaint_patchmatch(&im, &m, &p, 1));
+    g3d_inpainter bad;
+    CHECK_FAILS(g3d_inpainter_classic_create(&p, &bad));
     /* A mask leaving too little for one full patch still fills (smooth fallback). */
     CHECK_OK(g3d_inpaint_patchmatch(&im, &m, NULL, 1));
     CHECK(outside_identical(&im, &orig, &m));

@@ -590,17 +590,23 @@ static size_t count_sources(const level *L, int r)
 
 #define MAX_LEVELS 16
 
+static g3d_status check_params(const g3d_inpaint_params *p)
+{
+    if (p->patch < 3 || p->patch > 15 || !(p->patch & 1))
+        return G3D_ERR(G3D_ERR_ARG, "inpaint: patch size %d must be odd and in 3..15", p->patch);
+    if (p->em_iters < 1 || p->em_iters > 100 || p->pm_passes < 1 || p->pm_passes > 100 || p->coarse_side < 8)
+        return G3D_ERR(G3D_ERR_ARG, "inpaint: iterations %d/%d must be in 1..100 and coarse side %d >= 8",
+                       p->em_iters, p->pm_passes, p->coarse_side);
+    return G3D_OK;
+}
+
 g3d_status g3d_inpaint_patchmatch(g3d_image *image, const g3d_image *mask, const g3d_inpaint_params *params,
                                   uint64_t seed)
 {
     g3d_inpaint_params p;
     if (params) p = *params;
     else g3d_inpaint_params_default(&p);
-    if (p.patch < 3 || p.patch > 15 || !(p.patch & 1))
-        return G3D_ERR(G3D_ERR_ARG, "inpaint: patch size %d must be odd and in 3..15", p.patch);
-    if (p.em_iters < 1 || p.em_iters > 100 || p.pm_passes < 1 || p.pm_passes > 100 || p.coarse_side < 8)
-        return G3D_ERR(G3D_ERR_ARG, "inpaint: iterations %d/%d must be in 1..100 and coarse side %d >= 8",
-                       p.em_iters, p.pm_passes, p.coarse_side);
+    G3D_TRY(check_params(&p));
     size_t n_hole = 0;
     G3D_TRY(check_inputs(image, mask, &n_hole));
     if (!n_hole) return G3D_OK;
@@ -680,6 +686,7 @@ static g3d_status classic_inpaint(void *ctx, g3d_image *image, const g3d_image *
 
 g3d_status g3d_inpainter_classic_create(const g3d_inpaint_params *params, g3d_inpainter *out)
 {
+    if (params) G3D_TRY(check_params(params));
     g3d_inpaint_params *ctx = g3d_calloc(1, sizeof *ctx, "inpainter");
     if (!ctx) return G3D_ERR_NOMEM;
     if (params) *ctx = *params;
