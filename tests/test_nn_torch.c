@@ -1,6 +1,6 @@
-/* CPU operators (and the bilinear feature-map resize the DPT head uses) against PyTorch 1.13 outputs (tests/fixtures/make_nn_ops.py).
- * Tolerances are
- * relative L2 errors of 1e-5: float32 sums in a different order than PyTorch's kernels. */
+/* CPU operators, and the bilinear feature-map resize the DPT head uses, against PyTorch 1.13
+ * outputs (tests/fixtures/make_nn_ops.py). Tolerances are relative L2 errors of 1e-5: float32
+ * sums taken in a different order than PyTorch's kernels. */
 #include "gen3d/ckpt.h"
 #include "gen3d/nn.h"
 #include "gen3d/resize.h"
