@@ -1,6 +1,7 @@
 /* Depth Anything V2 ViT-S benchmark: seconds per 518x518 prediction with 2 threads, the
  * arithmetic rate it reaches, and that rate as a fraction of a plain sgemm of the backbone's
- * MLP shape measured in the same run (the ceiling for this design).
+ * MLP shape measured in the same run (the ceiling for this design), and the time of the same
+ * architecture in PyTorch (bench/bench_depth_torch.py) when /usr/bin/python3 has torch.
  * Run: cmake --build build --target bench && ./build/bench_depth [checkpoint]
  * (default: the seeded ViT-S weights of the golden reference; timing does not depend on values). */
 #include "gen3d/depth_anything.h"
@@ -75,6 +76,15 @@ int main(int argc, char **argv)
     printf("Depth Anything V2 ViT-S, %dx%d, %d threads: %.3f s per prediction (best of %d), %.2f GFLOP, %.1f GFLOP/s\n",
            size, size, threads, best, reps, gflop, gflop / best);
     printf("baseline sgemm %dx%dx%d: %.1f GFLOP/s; model reaches %.2f of it\n", n, k, mm, base, gflop / best / base);
+    FILE *py = popen("/usr/bin/python3 " G3D_SOURCE_DIR "/bench/bench_depth_torch.py 518 2 2 2>/dev/null", "r");
+    double tt = 0;
+    if (py) {
+        char line[128];
+        while (fgets(line, sizeof line, py)) sscanf(line, "torch_seconds %lf", &tt);
+        pclose(py);
+    }
+    if (tt > 0) printf("PyTorch, same architecture and threads: %.3f s per forward; gen3d is %.2fx faster\n", tt, tt / best);
+    else printf("PyTorch baseline unavailable (no /usr/bin/python3 with torch)\n");
     free(a); free(b); free(c); free(rgb); free(depth);
     g3d_dav2_free(m);
     return 0;
