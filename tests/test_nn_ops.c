@@ -66,6 +66,21 @@ TEST(conv2d_matches_definition)
     CHECK_FAILS(g3d_nn_conv2d(x, cin, 1, 1, wt, b, cout, 3, 1, 0, y));
 }
 
+TEST(conv2d_in_row_bands)
+{
+    /* wide enough that the scratch limit splits the 8 output rows into bands of 3 */
+    const int cin = 64, cout = 2, h = 8, w = 1000;
+    size_t nx = (size_t)cin * h * w, ny = (size_t)cout * h * w;
+    float *x = malloc(sizeof(float) * nx), *wt = malloc(sizeof(float) * cout * cin * 9), *y = malloc(sizeof(float) * ny),
+          *ref = malloc(sizeof(float) * ny), b[2] = {0.5f, -1};
+    fill(x, nx, 8);
+    fill(wt, (size_t)cout * cin * 9, 9);
+    CHECK_OK(g3d_nn_conv2d(x, cin, h, w, wt, b, cout, 3, 1, 1, y));
+    conv_ref(x, cin, h, w, wt, b, cout, 3, 1, 1, ref);
+    CHECK(max_abs_diff(y, ref, ny) < 1e-4);
+    free(x); free(wt); free(y); free(ref);
+}
+
 TEST(conv_transpose_matches_definition)
 {
     const int cin = 4, cout = 3, h = 3, w = 5, k = 2;
@@ -138,6 +153,7 @@ int main(void)
 {
     RUN(linear_small);
     RUN(conv2d_matches_definition);
+    RUN(conv2d_in_row_bands);
     RUN(conv_transpose_matches_definition);
     RUN(layernorm_gelu_relu);
     RUN(attention_matches_definition);

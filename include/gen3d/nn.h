@@ -29,7 +29,8 @@ int g3d_nn_conv_out(int size, int k, int stride, int pad);
 /* 2-D convolution, zero padding, no dilation, no groups.
  * x [cin, h, w], w [cout, cin, k, k], b [cout] or NULL -> y [cout, ho, wo] with
  * ho = g3d_nn_conv_out(h, k, stride, pad), likewise wo.
- * Needs a scratch buffer of cin*k*k*ho*wo floats, allocated inside; G3D_ERR_NOMEM on failure.
+ * Works through bands of output rows with a scratch of at most ~8 MB (at least one row),
+ * allocated inside; G3D_ERR_NOMEM on failure.
  * 1x1 stride-1 unpadded convolutions skip the scratch buffer. */
 g3d_status g3d_nn_conv2d(const float *x, int cin, int h, int w, const float *wt, const float *b, int cout, int k,
                          int stride, int pad, float *y);

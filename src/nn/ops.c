@@ -35,30 +35,38 @@ g3d_status g3d_nn_conv2d(const float *x, int cin, int h, int w, const float *wt,
                     b ? 1.0f : 0.0f, y, (int)plane);
         return G3D_OK;
     }
-    float *col = malloc(sizeof(float) * (size_t)kk * plane);
-    if (!col) return G3D_ERR(G3D_ERR_NOMEM, "conv2d: cannot allocate %zu MB of scratch", sizeof(float) * kk * plane >> 20);
-    /* col[(c*k + ky)*k + kx, oy*wo + ox] = x[c, oy*s - pad + ky, ox*s - pad + kx] or 0 outside. */
+    /* im2col over bands of output rows, so the scratch stays small and hot in cache instead
+     * of holding cin*k*k copies of the whole image. */
+    int band = (int)((size_t)(1 << 21) / ((size_t)kk * wo));
+    band = band < 1 ? 1 : band > ho ? ho : band;
+    size_t cols = (size_t)band * wo;
+    float *col = malloc(sizeof(float) * (size_t)kk * cols);
+    if (!col) return G3D_ERR(G3D_ERR_NOMEM, "conv2d: cannot allocate %zu MB of scratch", sizeof(float) * kk * cols >> 20);
+    for (int y0 = 0; y0 < ho; y0 += band) {
+        int nr = ho - y0 < band ? ho - y0 : band, nc = nr * wo;
+        /* col[(c*k + ky)*k + kx, (oy - y0)*wo + ox] = x[c, oy*s - pad + ky, ox*s - pad + kx] or 0 outside. */
 #pragma omp parallel for schedule(static)
-    for (int r = 0; r < kk; r++) {
-        int c = r / (k * k), ky = (r / k) % k, kx = r % k;
-        float *dst = col + (size_t)r * plane;
-        const float *src = x + (size_t)c * h * w;
-        for (int oy = 0; oy < ho; oy++) {
-            int iy = oy * stride - pad + ky;
-            float *row = dst + (size_t)oy * wo;
-            if (iy < 0 || iy >= h) {
-                memset(row, 0, sizeof(float) * (size_t)wo);
-                continue;
-            }
-            const float *srow = src + (size_t)iy * w;
-            for (int ox = 0; ox < wo; ox++) {
-                int ix = ox * stride - pad + kx;
-                row[ox] = (ix >= 0 && ix < w) ? srow[ix] : 0.0f;
+        for (int r = 0; r < kk; r++) {
+            int c = r / (k * k), ky = (r / k) % k, kx = r % k;
+            float *dst = col + (size_t)r * nc;
+            const float *src = x + (size_t)c * h * w;
+            for (int oy = y0; oy < y0 + nr; oy++) {
+                int iy = oy * stride - pad + ky;
+                float *row = dst + (size_t)(oy - y0) * wo;
+                if (iy < 0 || iy >= h) {
+                    memset(row, 0, sizeof(float) * (size_t)wo);
+                    continue;
+                }
+                const float *srow = src + (size_t)iy * w;
+                for (int ox = 0; ox < wo; ox++) {
+                    int ix = ox * stride - pad + kx;
+                    row[ox] = (ix >= 0 && ix < w) ? srow[ix] : 0.0f;
+                }
             }
         }
+        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, cout, nc, kk, 1.0f, wt, kk, col, nc, b ? 1.0f : 0.0f,
+                    y + (size_t)y0 * wo, (int)plane);
     }
-    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, cout, (int)plane, kk, 1.0f, wt, kk, col, (int)plane,
-                b ? 1.0f : 0.0f, y, (int)plane);
     free(col);
     return G3D_OK;
 }
