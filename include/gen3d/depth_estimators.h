@@ -1,0 +1,29 @@
+/* gen3d/depth_estimators.h - g3d_depth_estimator tables (gen3d/providers.h) built on the
+ * depth networks.
+ *
+ * Depth Anything V2 (relative) predicts inverse depth up to an unknown scale and shift, so its
+ * estimator needs known metric depth: it fits scale and shift in inverse depth on the pixels
+ * where `known` is valid (gen3d/depthfit.h, least squares) and returns the aligned prediction
+ * in metres for every pixel. Without known depth it fails with G3D_ERR_ARG rather than guess a
+ * scale. Intrinsics are not predicted: K_io is left as given.
+ */
+#ifndef G3D_DEPTH_ESTIMATORS_H
+#define G3D_DEPTH_ESTIMATORS_H
+
+#include "gen3d/depth_anything.h"
+#include "gen3d/providers.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Fills *out with an estimator running `model` at `input_size` (518 as trained; must be at
+ * least 14). The estimator takes ownership of model: out->free(out->ctx) releases it (also
+ * on failure of this call, model is freed). Concurrent estimate() calls on one table are
+ * safe (the model is immutable). */
+g3d_status g3d_dav2_estimator(g3d_dav2 *model, int input_size, g3d_depth_estimator *out);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* G3D_DEPTH_ESTIMATORS_H */

@@ -1,0 +1,347 @@
+/* Depth Anything V2: DINOv2 features through the DPT head (reassemble, RefineNet fusion). */
+#include "gen3d/depth_anything.h"
+
+#include "gen3d/nn.h"
+#include "gen3d/resize.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define PATCH 14
+
+typedef struct conv {
+    float *w, *b;   /* b may be NULL */
+    int cin, cout, k;
+} conv;
+
+typedef struct fusion {
+    conv rcu1a, rcu1b, rcu2a, rcu2b, out;
+} fusion;
+
+struct g3d_dav2 {
+    g3d_dinov2 *backbone;
+    int dim, feat, oc[4], layers[4];
+    conv project[4], resize[4], rn[4], out1, out2a, out2b;
+    fusion refine[4];
+};
+
+static g3d_status load_conv(const g3d_ckpt *ck, const char *name, int cout, int cin, int k, int bias, conv *c)
+{
+    char buf[256];
+    const int64_t ws[] = {cout, cin, k, k}, bs[] = {cout};
+    c->cin = cin;
+    c->cout = cout;
+    c->k = k;
+    snprintf(buf, sizeof buf, "%s.weight", name);
+    G3D_TRY(g3d_ckpt_read_alloc(ck, buf, 4, ws, &c->w));
+    if (!bias) return G3D_OK;
+    snprintf(buf, sizeof buf, "%s.bias", name);
+    return g3d_ckpt_read_alloc(ck, buf, 1, bs, &c->b);
+}
+
+static void free_conv(conv *c)
+{
+    free(c->w);
+    free(c->b);
+}
+
+void g3d_dav2_free(g3d_dav2 *m)
+{
+    if (!m) return;
+    g3d_dinov2_free(m->backbone);
+    for (int i = 0; i < 4; i++) {
+        free_conv(&m->project[i]);
+        free_conv(&m->resize[i]);
+        free_conv(&m->rn[i]);
+        conv *f = &m->refine[i].rcu1a;
+        for (int j = 0; j < 5; j++) free_conv(&f[j]);
+    }
+    free_conv(&m->out1);
+    free_conv(&m->out2a);
+    free_conv(&m->out2b);
+    free(m);
+}
+
+static g3d_status load_head(const g3d_ckpt *ck, g3d_dav2 *m)
+{
+    char name[128];
+    int D = m->dim, F = m->feat;
+    for (int i = 0; i < 4; i++) {
+        snprintf(name, sizeof name, "depth_head.projects.%d", i);
+        G3D_TRY(load_conv(ck, name, m->oc[i], D, 1, 1, &m->project[i]));
+    }
+    /* ConvTranspose weights are [C_in, C_out, k, k]; square here, so the conv shape check fits. */
+    G3D_TRY(load_conv(ck, "depth_head.resize_layers.0", m->oc[0], m->oc[0], 4, 1, &m->resize[0]));
+    G3D_TRY(load_conv(ck, "depth_head.resize_layers.1", m->oc[1], m->oc[1], 2, 1, &m->resize[1]));
+    G3D_TRY(load_conv(ck, "depth_head.resize_layers.3", m->oc[3], m->oc[3], 3, 1, &m->resize[3]));
+    for (int i = 0; i < 4; i++) {
+        snprintf(name, sizeof name, "depth_head.scratch.layer%d_rn", i + 1);
+        G3D_TRY(load_conv(ck, name, F, m->oc[i], 3, 0, &m->rn[i]));
+        static const char *parts[] = {"resConfUnit1.conv1", "resConfUnit1.conv2", "resConfUnit2.conv1",
+                                      "resConfUnit2.conv2", "out_conv"};
+        conv *f = &m->refine[i].rcu1a;
+        /* refinenet4 has no skip input, so its first residual unit is never used. */
+        for (int j = i == 3 ? 2 : 0; j < 5; j++) {
+            snprintf(name, sizeof name, "depth_head.scratch.refinenet%d.%s", i + 1, parts[j]);
+            G3D_TRY(load_conv(ck, name, F, F, j == 4 ? 1 : 3, 1, &f[j]));
+        }
+    }
+    G3D_TRY(load_conv(ck, "depth_head.scratch.output_conv1", F / 2, F, 3, 1, &m->out1));
+    G3D_TRY(load_conv(ck, "depth_head.scratch.output_conv2.0", 32, F / 2, 3, 1, &m->out2a));
+    return load_conv(ck, "depth_head.scratch.output_conv2.2", 1, 32, 1, 1, &m->out2b);
+}
+
+g3d_status g3d_dav2_load(const g3d_ckpt *ck, g3d_dav2 **out)
+{
+    *out = NULL;
+    const g3d_tensor_info *rn = g3d_ckpt_find(ck, "depth_head.scratch.layer1_rn.weight");
+    if (!rn || rn->ndim != 4)
+        return G3D_ERR(G3D_ERR_MODEL, "%s: not a Depth Anything V2 checkpoint: tensor "
+                       "depth_head.scratch.layer1_rn.weight %s", g3d_ckpt_path(ck), rn ? "is not 4-D" : "is missing");
+    g3d_dav2 *m = calloc(1, sizeof *m);
+    if (!m) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    g3d_status rc = g3d_dinov2_load(ck, "pretrained.", &m->backbone);
+    if (rc == G3D_OK) {
+        m->dim = g3d_dinov2_width(m->backbone);
+        m->feat = (int)rn->shape[0];
+        /* Blocks feeding the head, per encoder depth (official intermediate_layer_idx). */
+        static const int l12[4] = {2, 5, 8, 11}, l24[4] = {4, 11, 17, 23};
+        int depth = g3d_dinov2_depth(m->backbone);
+        if (depth != 12 && depth != 24)
+            rc = G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: backbone with %d blocks (expected 12 or 24)", g3d_ckpt_path(ck), depth);
+        else
+            memcpy(m->layers, depth == 12 ? l12 : l24, sizeof m->layers);
+        for (int i = 0; i < 4 && rc == G3D_OK; i++) {
+            char name[64];
+            snprintf(name, sizeof name, "depth_head.projects.%d.weight", i);
+            const g3d_tensor_info *t = g3d_ckpt_find(ck, name);
+            if (!t || t->ndim != 4) rc = G3D_ERR(G3D_ERR_MODEL, "%s: tensor %s is missing or not 4-D", g3d_ckpt_path(ck), name);
+            else m->oc[i] = (int)t->shape[0];
+        }
+    }
+    if (rc == G3D_OK) rc = load_head(ck, m);
+    if (rc != G3D_OK) {
+        g3d_dav2_free(m);
+        return rc;
+    }
+    *out = m;
+    return G3D_OK;
+}
+
+g3d_status g3d_dav2_load_file(const char *path, g3d_dav2 **out)
+{
+    g3d_ckpt *ck;
+    *out = NULL;
+    G3D_TRY(g3d_ckpt_open(path, &ck));
+    g3d_status rc = g3d_dav2_load(ck, out);
+    g3d_ckpt_free(ck);
+    return rc;
+}
+
+void g3d_dav2_trace_free(g3d_dav2_trace *t)
+{
+    if (!t) return;
+    free(t->input);
+    t->input = NULL;
+    g3d_dinov2_trace_free(&t->backbone);
+    for (int i = 0; i < 4; i++) {
+        free(t->feature[i]);
+        free(t->path[i]);
+        t->feature[i] = t->path[i] = NULL;
+    }
+    free(t->depth);
+    t->depth = NULL;
+}
+
+/* numpy's round (half to even) for the multiple-of-14 rule. */
+static int constrain14(double x, int min_val)
+{
+    int y = (int)(nearbyint(x / PATCH) * PATCH);
+    if (y < min_val) y = (int)(ceil(x / PATCH) * PATCH);
+    return y;
+}
+
+g3d_status g3d_dav2_net_size(int w, int h, int input_size, int *net_w, int *net_h)
+{
+    if (w <= 0 || h <= 0 || w > 32768 || h > 32768)
+        return G3D_ERR(G3D_ERR_ARG, "image size %dx%d is outside 1..32768", w, h);
+    if (input_size < PATCH || input_size > 32768)
+        return G3D_ERR(G3D_ERR_ARG, "input size %d is outside %d..32768", input_size, PATCH);
+    double sh = (double)input_size / h, sw = (double)input_size / w;
+    double s = sw > sh ? sw : sh;
+    *net_w = constrain14(s * w, input_size);
+    *net_h = constrain14(s * h, input_size);
+    if (*net_w > 32768 || *net_h > 32768)
+        return G3D_ERR(G3D_ERR_ARG, "image %dx%d at input size %d needs a %dx%d network input (over 32768)", w, h,
+                       input_size, *net_w, *net_h);
+    return G3D_OK;
+}
+
+/* Bilinear align_corners=True resize of c planes [c, sh, sw] -> [c, dh, dw]. */
+static g3d_status resize_planes(const float *src, int c, int sh, int sw, float *dst, int dh, int dw)
+{
+    for (int i = 0; i < c; i++)
+        G3D_TRY(g3d_resize_buffer(src + (size_t)i * sh * sw, sw, sh, 1, dst + (size_t)i * dh * dw, dw, dh,
+                                  G3D_RESIZE_BILINEAR_AC));
+    return G3D_OK;
+}
+
+static float *alloc_f(size_t n) { return malloc(sizeof(float) * (n ? n : 1)); }
+
+static g3d_status run_conv(const conv *c, const float *x, int h, int w, int stride, float *y)
+{
+    return g3d_nn_conv2d(x, c->cin, h, w, c->w, c->b, c->cout, c->k, stride, c->k / 2, y);
+}
+
+/* x + conv2(relu(conv1(relu(x)))) into y; tmp holds 2 * F*h*w floats. */
+static g3d_status residual_unit(const conv *c1, const conv *c2, const float *x, int h, int w, float *tmp, float *y)
+{
+    size_t n = (size_t)c1->cin * h * w;
+    float *a = tmp, *b = tmp + n;
+    memcpy(a, x, sizeof(float) * n);
+    g3d_nn_relu(a, n);
+    G3D_TRY(run_conv(c1, a, h, w, 1, b));
+    g3d_nn_relu(b, n);
+    G3D_TRY(run_conv(c2, b, h, w, 1, y));
+    g3d_nn_add(y, x, n);
+    return G3D_OK;
+}
+
+/* One RefineNet block: (path + rcu1(skip)) -> rcu2 -> bilinear to (oh, ow) -> 1x1 out_conv.
+ * skip may be NULL. Returns a new [F, oh, ow] buffer in *out. */
+static g3d_status fuse(const fusion *f, const float *path, const float *skip, int h, int w, int oh, int ow,
+                       float **out)
+{
+    int F = f->out.cin;
+    size_t n = (size_t)F * h * w;
+    float *tmp = alloc_f(2 * n), *acc = alloc_f(n), *r = alloc_f(n), *up = alloc_f((size_t)F * oh * ow);
+    float *res = alloc_f((size_t)F * oh * ow);
+    g3d_status rc = tmp && acc && r && up && res ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    if (rc == G3D_OK) {
+        memcpy(acc, path, sizeof(float) * n);
+        if (skip) {
+            rc = residual_unit(&f->rcu1a, &f->rcu1b, skip, h, w, tmp, r);
+            if (rc == G3D_OK) g3d_nn_add(acc, r, n);
+        }
+    }
+    if (rc == G3D_OK) rc = residual_unit(&f->rcu2a, &f->rcu2b, acc, h, w, tmp, r);
+    if (rc == G3D_OK) rc = resize_planes(r, F, h, w, up, oh, ow);
+    if (rc == G3D_OK) rc = run_conv(&f->out, up, oh, ow, 1, res);
+    free(tmp); free(acc); free(r); free(up);
+    if (rc != G3D_OK) {
+        free(res);
+        res = NULL;
+    }
+    *out = res;
+    return rc;
+}
+
+/* DPT head: features [4][h*w, D] -> depth [14h, 14w] (after the final ReLU). */
+static g3d_status head(const g3d_dav2 *m, float *const *feats, int h, int w, float *depth, g3d_dav2_trace *trace)
+{
+    int D = m->dim, F = m->feat, np = h * w;
+    int lh[4] = {4 * h, 2 * h, h, (h + 1) / 2}, lw[4] = {4 * w, 2 * w, w, (w + 1) / 2};
+    float *rn[4] = {0}, *path[4] = {0};
+    float *tok = alloc_f((size_t)np * D), *proj = NULL, *rs = NULL, *o1 = NULL, *o1up = NULL, *o2 = NULL;
+    g3d_status rc = tok ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    for (int i = 0; i < 4 && rc == G3D_OK; i++) {
+        /* tokens [h*w, D] -> map [D, h, w] */
+        for (int t = 0; t < np; t++)
+            for (int c = 0; c < D; c++) tok[(size_t)c * np + t] = feats[i][(size_t)t * D + c];
+        int oc = m->oc[i];
+        proj = alloc_f((size_t)oc * np);
+        rs = alloc_f((size_t)oc * lh[i] * lw[i]);
+        rn[i] = alloc_f((size_t)F * lh[i] * lw[i]);
+        if (!proj || !rs || !rn[i]) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+        if (rc == G3D_OK) rc = run_conv(&m->project[i], tok, h, w, 1, proj);
+        if (rc == G3D_OK) {
+            if (i < 2) rc = g3d_nn_conv_transpose2d(proj, oc, h, w, m->resize[i].w, m->resize[i].b, oc, m->resize[i].k, rs);
+            else if (i == 2) memcpy(rs, proj, sizeof(float) * (size_t)oc * np);
+            else rc = run_conv(&m->resize[3], proj, h, w, 2, rs);
+        }
+        if (rc == G3D_OK) rc = run_conv(&m->rn[i], rs, lh[i], lw[i], 1, rn[i]);
+        free(proj);
+        free(rs);
+        proj = rs = NULL;
+    }
+    /* refinenet4 (layer4 -> layer3 size) ... refinenet1 (-> twice layer1's size) */
+    if (rc == G3D_OK) rc = fuse(&m->refine[3], rn[3], NULL, lh[3], lw[3], lh[2], lw[2], &path[3]);
+    for (int i = 2; i >= 0 && rc == G3D_OK; i--) {
+        int oh = i ? lh[i - 1] : 2 * lh[0], ow = i ? lw[i - 1] : 2 * lw[0];
+        rc = fuse(&m->refine[i], path[i + 1], rn[i], lh[i], lw[i], oh, ow, &path[i]);
+    }
+    int ph = 8 * h, pw = 8 * w, H = PATCH * h, W = PATCH * w;
+    if (rc == G3D_OK) {
+        o1 = alloc_f((size_t)(F / 2) * ph * pw);
+        o1up = alloc_f((size_t)(F / 2) * H * W);
+        o2 = alloc_f((size_t)32 * H * W);
+        if (!o1 || !o1up || !o2) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    }
+    if (rc == G3D_OK) rc = run_conv(&m->out1, path[0], ph, pw, 1, o1);
+    if (rc == G3D_OK) rc = resize_planes(o1, F / 2, ph, pw, o1up, H, W);
+    if (rc == G3D_OK) rc = run_conv(&m->out2a, o1up, H, W, 1, o2);
+    if (rc == G3D_OK) {
+        g3d_nn_relu(o2, (size_t)32 * H * W);
+        rc = run_conv(&m->out2b, o2, H, W, 1, depth);
+    }
+    if (rc == G3D_OK) g3d_nn_relu(depth, (size_t)H * W);
+    if (rc == G3D_OK && trace && trace->want) {
+        int hs[4] = {ph, 4 * h, 2 * h, h}, ws[4] = {pw, 4 * w, 2 * w, w};
+        for (int i = 0; i < 4; i++) {
+            trace->path[i] = path[i];
+            trace->path_h[i] = hs[i];
+            trace->path_w[i] = ws[i];
+            path[i] = NULL;
+        }
+    }
+    for (int i = 0; i < 4; i++) {
+        free(rn[i]);
+        free(path[i]);
+    }
+    free(tok); free(proj); free(rs); free(o1); free(o1up); free(o2);
+    return rc;
+}
+
+g3d_status g3d_dav2_predict(const g3d_dav2 *m, const float *rgb, int w, int h, int input_size, float *depth,
+                            g3d_dav2_trace *trace)
+{
+    int W, H;
+    G3D_TRY(g3d_dav2_net_size(w, h, input_size, &W, &H));
+    static const float mean[3] = {0.485f, 0.456f, 0.406f}, stdv[3] = {0.229f, 0.224f, 0.225f};
+    size_t plane = (size_t)W * H;
+    float *rs = alloc_f(3 * plane), *x = alloc_f(3 * plane), *net = alloc_f(plane);
+    float *feats[4] = {0};
+    g3d_status rc = rs && x && net ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "Depth Anything: out of memory at %dx%d", W, H);
+    if (rc == G3D_OK) rc = g3d_resize_buffer(rgb, w, h, 3, rs, W, H, G3D_RESIZE_CUBIC_OPENCV);
+    if (rc == G3D_OK) {
+        for (size_t i = 0; i < plane; i++)
+            for (int c = 0; c < 3; c++) x[c * plane + i] = (float)(((double)rs[i * 3 + c] - mean[c]) / stdv[c]);
+        if (trace && trace->want) {
+            memset(trace->feature, 0, sizeof trace->feature);
+            memset(trace->path, 0, sizeof trace->path);
+            trace->net_w = W;
+            trace->net_h = H;
+            trace->backbone.want = 1;
+            trace->depth = NULL;
+            trace->input = alloc_f(3 * plane);
+            if (!trace->input) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+            else memcpy(trace->input, x, sizeof(float) * 3 * plane);
+        }
+    }
+    if (rc == G3D_OK)
+        rc = g3d_dinov2_forward(m->backbone, x, H, W, m->layers, 4, feats, NULL, trace && trace->want ? &trace->backbone : NULL);
+    if (rc == G3D_OK) rc = head(m, feats, H / PATCH, W / PATCH, net, trace);
+    if (rc == G3D_OK) rc = g3d_resize_buffer(net, W, H, 1, depth, w, h, G3D_RESIZE_BILINEAR_AC);
+    if (rc == G3D_OK && trace && trace->want) {
+        memcpy(trace->feature, feats, sizeof feats);
+        memset(feats, 0, sizeof feats);
+        trace->depth = net;
+        net = NULL;
+    }
+    for (int i = 0; i < 4; i++) free(feats[i]);
+    free(rs); free(x); free(net);
+    if (rc != G3D_OK && trace) g3d_dav2_trace_free(trace);
+    return rc;
+}

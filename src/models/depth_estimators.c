@@ -1,0 +1,67 @@
+/* Depth estimator tables on the depth networks (gen3d/depth_estimators.h). */
+#include "gen3d/depth_estimators.h"
+
+#include "gen3d/depthfit.h"
+
+#include <stdlib.h>
+
+typedef struct dav2_ctx {
+    g3d_dav2 *model;
+    int input_size;
+} dav2_ctx;
+
+static void dav2_free(void *ctx)
+{
+    dav2_ctx *c = ctx;
+    if (!c) return;
+    g3d_dav2_free(c->model);
+    free(c);
+}
+
+static g3d_status dav2_estimate(void *ctx, const g3d_image *rgb, const g3d_image *known, const g3d_image *mask,
+                                g3d_image *depth_out, g3d_intrinsics *K_io)
+{
+    const dav2_ctx *c = ctx;
+    (void)mask;   /* the network predicts every pixel anyway */
+    (void)K_io;
+    if (!rgb || rgb->c != 3 || !rgb->data)
+        return G3D_ERR(G3D_ERR_ARG, "depth-anything: the image must have 3 channels (got %d)", rgb ? rgb->c : 0);
+    if (!known || !known->data)
+        return G3D_ERR(G3D_ERR_ARG, "depth-anything: relative depth needs known depth to align to metres");
+    if (known->c != 1 || known->w != rgb->w || known->h != rgb->h)
+        return G3D_ERR(G3D_ERR_MISMATCH, "depth-anything: known depth is %dx%dx%d, image %dx%d", known->w,
+                       known->h, known->c, rgb->w, rgb->h);
+    g3d_image pred = {0};
+    G3D_TRY(g3d_image_create(&pred, rgb->w, rgb->h, 1));
+    size_t n = (size_t)rgb->w * rgb->h;
+    double s = 0, t = 0;
+    g3d_status rc = g3d_dav2_predict(c->model, rgb->data, rgb->w, rgb->h, c->input_size, pred.data, NULL);
+    if (rc == G3D_OK) rc = g3d_depthfit_affine(pred.data, known->data, n, G3D_FIT_INVERSE, &s, &t);
+    if (rc != G3D_OK) {
+        g3d_image_free(&pred);
+        return rc;
+    }
+    g3d_depthfit_apply(pred.data, n, G3D_FIT_INVERSE, s, t, pred.data);
+    *depth_out = pred;
+    return G3D_OK;
+}
+
+g3d_status g3d_dav2_estimator(g3d_dav2 *model, int input_size, g3d_depth_estimator *out)
+{
+    if (input_size < 14) {
+        g3d_dav2_free(model);
+        return G3D_ERR(G3D_ERR_ARG, "depth-anything: input size %d is below one 14-pixel patch", input_size);
+    }
+    dav2_ctx *c = malloc(sizeof *c);
+    if (!c) {
+        g3d_dav2_free(model);
+        return G3D_ERR(G3D_ERR_NOMEM, "depth-anything: out of memory");
+    }
+    c->model = model;
+    c->input_size = input_size;
+    out->name = "depth-anything-v2";
+    out->ctx = c;
+    out->estimate = dav2_estimate;
+    out->free = dav2_free;
+    return G3D_OK;
+}

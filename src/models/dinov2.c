@@ -1,0 +1,297 @@
+/* DINOv2 ViT backbone: patch embedding, resized position grid, pre-norm blocks with LayerScale. */
+#include "gen3d/dinov2.h"
+
+#include "gen3d/nn.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define PATCH 14
+#define HEAD_DIM 64
+#define LN_EPS 1e-6f
+/* The official code adds 0.1 to the target grid size before deriving the scale factor, to
+ * dodge a floating-point rounding problem in the output size; the scale it yields is used. */
+#define POS_OFFSET 0.1
+
+typedef struct dino_block {
+    float *n1w, *n1b, *qkvw, *qkvb, *projw, *projb, *ls1;
+    float *n2w, *n2b, *fc1w, *fc1b, *fc2w, *fc2b, *ls2;
+} dino_block;
+
+struct g3d_dinov2 {
+    int dim, depth, hidden, grid; /* grid: side of the trained position grid */
+    float *cls, *pos, *pew, *peb, *normw, *normb;
+    dino_block *blocks;
+};
+
+typedef struct loader {
+    const g3d_ckpt *ck;
+    const char *prefix;
+} loader;
+
+static g3d_status load(const loader *l, float **dst, int ndim, const int64_t *shape, const char *fmt, ...)
+{
+    char name[256], full[512];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(name, sizeof name, fmt, ap);
+    va_end(ap);
+    snprintf(full, sizeof full, "%s%s", l->prefix, name);
+    return g3d_ckpt_read_alloc(l->ck, full, ndim, shape, dst);
+}
+
+static const g3d_tensor_info *find(const loader *l, const char *name)
+{
+    char full[512];
+    snprintf(full, sizeof full, "%s%s", l->prefix, name);
+    return g3d_ckpt_find(l->ck, full);
+}
+
+void g3d_dinov2_free(g3d_dinov2 *m)
+{
+    if (!m) return;
+    free(m->cls); free(m->pos); free(m->pew); free(m->peb); free(m->normw); free(m->normb);
+    if (m->blocks) {
+        for (int i = 0; i < m->depth; i++) {
+            float **f = (float **)&m->blocks[i];
+            for (size_t j = 0; j < sizeof(dino_block) / sizeof(float *); j++) free(f[j]);
+        }
+        free(m->blocks);
+    }
+    free(m);
+}
+
+g3d_status g3d_dinov2_load(const g3d_ckpt *ck, const char *prefix, g3d_dinov2 **out)
+{
+    *out = NULL;
+    loader l = {ck, prefix ? prefix : ""};
+    const g3d_tensor_info *pe = find(&l, "pos_embed");
+    if (!pe || pe->ndim != 3 || pe->shape[0] != 1)
+        return G3D_ERR(G3D_ERR_MODEL, "%s: no DINOv2 backbone: tensor %spos_embed %s", g3d_ckpt_path(ck), l.prefix,
+                       pe ? "is not [1, N, D]" : "is missing");
+    if (find(&l, "blocks.0.mlp.w12.weight"))
+        return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: DINOv2 with a SwiGLU MLP (ViT-G) is not supported", g3d_ckpt_path(ck));
+    int64_t npos = pe->shape[1] - 1, D = pe->shape[2];
+    int grid = (int)lround(sqrt((double)npos));
+    if (grid * grid != npos || D % HEAD_DIM || D > 4096)
+        return G3D_ERR(G3D_ERR_MODEL, "%s: %spos_embed has shape [1, %lld, %lld]: not a square grid of a known width",
+                       g3d_ckpt_path(ck), l.prefix, (long long)pe->shape[1], (long long)D);
+    const g3d_tensor_info *fc1 = find(&l, "blocks.0.mlp.fc1.weight");
+    if (!fc1 || fc1->ndim != 2)
+        return G3D_ERR(G3D_ERR_MODEL, "%s: tensor %sblocks.0.mlp.fc1.weight is missing or not 2-D", g3d_ckpt_path(ck),
+                       l.prefix);
+    int depth = 0;
+    char name[64];
+    for (;; depth++) {
+        snprintf(name, sizeof name, "blocks.%d.norm1.weight", depth);
+        if (!find(&l, name)) break;
+    }
+    g3d_dinov2 *m = calloc(1, sizeof *m);
+    if (!m) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    m->dim = (int)D;
+    m->depth = depth;
+    m->hidden = (int)fc1->shape[0];
+    m->grid = grid;
+    m->blocks = calloc((size_t)(depth ? depth : 1), sizeof *m->blocks);
+    g3d_status rc = m->blocks ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    const int64_t d1[] = {D}, cls[] = {1, 1, D}, pos[] = {1, npos + 1, D}, pew[] = {D, 3, PATCH, PATCH};
+    const int64_t qkvw[] = {3 * D, D}, qkvb[] = {3 * D}, projw[] = {D, D}, fc1w[] = {m->hidden, D},
+                  fc1b[] = {m->hidden}, fc2w[] = {D, m->hidden};
+    if (rc == G3D_OK) rc = load(&l, &m->cls, 3, cls, "cls_token");
+    if (rc == G3D_OK) rc = load(&l, &m->pos, 3, pos, "pos_embed");
+    if (rc == G3D_OK) rc = load(&l, &m->pew, 4, pew, "patch_embed.proj.weight");
+    if (rc == G3D_OK) rc = load(&l, &m->peb, 1, d1, "patch_embed.proj.bias");
+    if (rc == G3D_OK) rc = load(&l, &m->normw, 1, d1, "norm.weight");
+    if (rc == G3D_OK) rc = load(&l, &m->normb, 1, d1, "norm.bias");
+    for (int i = 0; i < depth && rc == G3D_OK; i++) {
+        dino_block *b = &m->blocks[i];
+        struct { float **dst; int nd; const int64_t *shape; const char *name; } t[] = {
+            {&b->n1w, 1, d1, "norm1.weight"},     {&b->n1b, 1, d1, "norm1.bias"},
+            {&b->qkvw, 2, qkvw, "attn.qkv.weight"}, {&b->qkvb, 1, qkvb, "attn.qkv.bias"},
+            {&b->projw, 2, projw, "attn.proj.weight"}, {&b->projb, 1, d1, "attn.proj.bias"},
+            {&b->ls1, 1, d1, "ls1.gamma"},        {&b->n2w, 1, d1, "norm2.weight"},
+            {&b->n2b, 1, d1, "norm2.bias"},       {&b->fc1w, 2, fc1w, "mlp.fc1.weight"},
+            {&b->fc1b, 1, fc1b, "mlp.fc1.bias"},  {&b->fc2w, 2, fc2w, "mlp.fc2.weight"},
+            {&b->fc2b, 1, d1, "mlp.fc2.bias"},    {&b->ls2, 1, d1, "ls2.gamma"},
+        };
+        for (size_t j = 0; j < sizeof t / sizeof *t && rc == G3D_OK; j++)
+            rc = load(&l, t[j].dst, t[j].nd, t[j].shape, "blocks.%d.%s", i, t[j].name);
+    }
+    if (rc == G3D_OK && depth == 0) rc = G3D_ERR(G3D_ERR_MODEL, "%s: no %sblocks.0.* tensors", g3d_ckpt_path(ck), l.prefix);
+    if (rc != G3D_OK) {
+        g3d_dinov2_free(m);
+        return rc;
+    }
+    *out = m;
+    return G3D_OK;
+}
+
+int g3d_dinov2_width(const g3d_dinov2 *m) { return m->dim; }
+int g3d_dinov2_depth(const g3d_dinov2 *m) { return m->depth; }
+
+void g3d_dinov2_trace_free(g3d_dinov2_trace *t)
+{
+    if (!t) return;
+    free(t->patch_embed);
+    if (t->block)
+        for (int i = 0; i < t->nblocks; i++) free(t->block[i]);
+    free(t->block);
+    t->patch_embed = NULL;
+    t->block = NULL;
+    t->nblocks = 0;
+}
+
+/* PyTorch's bicubic convolution kernel, a = -0.75, evaluated in float as it does. */
+static void cubic_weights(float t, float w[4])
+{
+    const float A = -0.75f;
+    float x1 = t + 1, x2 = 1 - t, x3 = 2 - t;
+    w[0] = ((A * x1 - 5 * A) * x1 + 8 * A) * x1 - 4 * A;
+    w[1] = ((A + 2) * t - (A + 3)) * t * t + 1;
+    w[2] = ((A + 2) * x2 - (A + 3)) * x2 * x2 + 1;
+    w[3] = ((A * x3 - 5 * A) * x3 + 8 * A) * x3 - 4 * A;
+}
+
+/* Source taps of F.interpolate(mode='bicubic', align_corners=False, scale_factor=s): the
+ * coordinate maps with 1/s (not in/out), indices are clamped to the border. */
+static void cubic_taps(int dst, double s, int n, int idx[4], float w[4])
+{
+    float inv = (float)(1.0 / s);
+    float real = inv * ((float)dst + 0.5f) - 0.5f;
+    float f = floorf(real);
+    cubic_weights(real - f, w);
+    for (int k = 0; k < 4; k++) {
+        int i = (int)f - 1 + k;
+        idx[k] = i < 0 ? 0 : i >= n ? n - 1 : i;
+    }
+}
+
+/* pos [(1 + g*g), D] -> out [(1 + h*w), D]. */
+static void resize_pos(const g3d_dinov2 *m, int h, int w, float *out)
+{
+    int g = m->grid, D = m->dim;
+    memcpy(out, m->pos, sizeof(float) * (size_t)D);
+    if (h == g && w == g) {
+        memcpy(out + D, m->pos + D, sizeof(float) * (size_t)D * g * g);
+        return;
+    }
+    double sy = (h + POS_OFFSET) / g, sx = (w + POS_OFFSET) / g;
+    const float *grid = m->pos + D;
+#pragma omp parallel for schedule(static)
+    for (int oy = 0; oy < h; oy++) {
+        int iy[4], ix[4];
+        float wy[4], wx[4];
+        cubic_taps(oy, sy, g, iy, wy);
+        for (int ox = 0; ox < w; ox++) {
+            cubic_taps(ox, sx, g, ix, wx);
+            float *dst = out + (size_t)(1 + oy * w + ox) * D;
+            for (int c = 0; c < D; c++) {
+                float acc = 0;
+                for (int ky = 0; ky < 4; ky++) {
+                    const float *row = grid + (size_t)iy[ky] * g * D + c;
+                    float r = row[(size_t)ix[0] * D] * wx[0] + row[(size_t)ix[1] * D] * wx[1] +
+                              row[(size_t)ix[2] * D] * wx[2] + row[(size_t)ix[3] * D] * wx[3];
+                    acc += r * wy[ky];
+                }
+                dst[c] = acc;
+            }
+        }
+    }
+}
+
+static float *dup(const float *v, size_t n)
+{
+    float *d = malloc(sizeof(float) * n);
+    if (d) memcpy(d, v, sizeof(float) * n);
+    return d;
+}
+
+g3d_status g3d_dinov2_forward(const g3d_dinov2 *m, const float *x, int H, int W, const int *layers, int nlayers,
+                              float **feats, float **cls, g3d_dinov2_trace *trace)
+{
+    if (H <= 0 || W <= 0 || H % PATCH || W % PATCH || H > 32768 || W > 32768)
+        return G3D_ERR(G3D_ERR_ARG, "DINOv2 input %dx%d: sides must be positive multiples of %d up to 32768", W, H,
+                       PATCH);
+    for (int i = 0; i < nlayers; i++)
+        if (layers[i] < 0 || layers[i] >= m->depth || (i && layers[i] <= layers[i - 1]))
+            return G3D_ERR(G3D_ERR_ARG, "DINOv2: layer list must be increasing block indices below %d", m->depth);
+    int h = H / PATCH, w = W / PATCH, np = h * w, n = np + 1, D = m->dim, K = 3 * PATCH * PATCH;
+    for (int i = 0; i < nlayers; i++) {
+        feats[i] = NULL;
+        if (cls) cls[i] = NULL;
+    }
+    if (trace && trace->want) {
+        trace->nblocks = m->depth;
+        trace->patch_embed = NULL;
+        trace->block = calloc((size_t)m->depth, sizeof(float *));
+        if (!trace->block) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    }
+    size_t nd = (size_t)n * D;
+    float *X = malloc(sizeof(float) * nd), *T = malloc(sizeof(float) * nd), *A = malloc(sizeof(float) * nd);
+    float *big = malloc(sizeof(float) * (size_t)n * (size_t)(m->hidden > 3 * D ? m->hidden : 3 * D));
+    float *patches = malloc(sizeof(float) * (size_t)np * (K > D ? K : D));
+    g3d_status rc = G3D_OK;
+    if (!X || !T || !A || !big || !patches) {
+        rc = G3D_ERR(G3D_ERR_NOMEM, "DINOv2: cannot allocate activations for %dx%d", W, H);
+        goto done;
+    }
+    /* Patch embedding as a product: each 14x14x3 patch becomes a row in the weight's order. */
+    for (int py = 0; py < h; py++)
+        for (int px = 0; px < w; px++) {
+            float *row = patches + (size_t)(py * w + px) * K;
+            for (int c = 0; c < 3; c++)
+                for (int ky = 0; ky < PATCH; ky++)
+                    memcpy(row + (c * PATCH + ky) * PATCH, x + ((size_t)c * H + py * PATCH + ky) * W + px * PATCH,
+                           sizeof(float) * PATCH);
+        }
+    g3d_nn_linear(patches, np, K, m->pew, m->peb, D, X + D);
+    if (trace && trace->want && !(trace->patch_embed = dup(X + D, (size_t)np * D))) {
+        rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+        goto done;
+    }
+    memcpy(X, m->cls, sizeof(float) * (size_t)D);
+    resize_pos(m, h, w, T);
+    g3d_nn_add(X, T, nd);
+
+    int next = 0;
+    for (int bi = 0; bi < m->depth && rc == G3D_OK; bi++) {
+        const dino_block *b = &m->blocks[bi];
+        g3d_nn_layernorm(X, n, D, b->n1w, b->n1b, LN_EPS, T);
+        g3d_nn_linear(T, n, D, b->qkvw, b->qkvb, 3 * D, big);
+        rc = g3d_nn_attention(big, n, D / HEAD_DIM, HEAD_DIM, 1.0f / sqrtf((float)HEAD_DIM), A);
+        if (rc != G3D_OK) break;
+        g3d_nn_linear(A, n, D, b->projw, b->projb, D, T);
+#pragma omp parallel for schedule(static)
+        for (int i = 0; i < n; i++)
+            for (int c = 0; c < D; c++) X[(size_t)i * D + c] += b->ls1[c] * T[(size_t)i * D + c];
+        g3d_nn_layernorm(X, n, D, b->n2w, b->n2b, LN_EPS, T);
+        g3d_nn_linear(T, n, D, b->fc1w, b->fc1b, m->hidden, big);
+        g3d_nn_gelu(big, (size_t)n * m->hidden);
+        g3d_nn_linear(big, n, m->hidden, b->fc2w, b->fc2b, D, T);
+#pragma omp parallel for schedule(static)
+        for (int i = 0; i < n; i++)
+            for (int c = 0; c < D; c++) X[(size_t)i * D + c] += b->ls2[c] * T[(size_t)i * D + c];
+        if (trace && trace->want && !(trace->block[bi] = dup(X, nd))) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+        if (next < nlayers && layers[next] == bi && rc == G3D_OK) {
+            g3d_nn_layernorm(X, n, D, m->normw, m->normb, LN_EPS, T);
+            feats[next] = dup(T + D, (size_t)np * D);
+            if (cls) cls[next] = dup(T, (size_t)D);
+            if (!feats[next] || (cls && !cls[next])) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+            next++;
+        }
+    }
+done:
+    free(X); free(T); free(A); free(big); free(patches);
+    if (rc != G3D_OK) {
+        for (int i = 0; i < nlayers; i++) {
+            free(feats[i]);
+            feats[i] = NULL;
+            if (cls) { free(cls[i]); cls[i] = NULL; }
+        }
+        g3d_dinov2_trace_free(trace);
+    }
+    return rc;
+}

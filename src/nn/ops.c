@@ -1,0 +1,155 @@
+/* CPU operators: sgemm for the products, plain loops for the rest. */
+#include "gen3d/nn.h"
+
+#include <cblas.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+void g3d_nn_linear(const float *x, int n, int in, const float *w, const float *b, int out, float *y)
+{
+    if (b) {
+        for (int i = 0; i < n; i++) memcpy(y + (size_t)i * out, b, sizeof(float) * (size_t)out);
+    }
+    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, n, out, in, 1.0f, x, in, w, in, b ? 1.0f : 0.0f, y, out);
+}
+
+int g3d_nn_conv_out(int size, int k, int stride, int pad) { return (size + 2 * pad - k) / stride + 1; }
+
+static void fill_bias(float *y, const float *b, int c, size_t plane)
+{
+    for (int o = 0; o < c; o++)
+        for (size_t i = 0; i < plane; i++) y[(size_t)o * plane + i] = b[o];
+}
+
+g3d_status g3d_nn_conv2d(const float *x, int cin, int h, int w, const float *wt, const float *b, int cout, int k,
+                         int stride, int pad, float *y)
+{
+    int ho = g3d_nn_conv_out(h, k, stride, pad), wo = g3d_nn_conv_out(w, k, stride, pad);
+    if (ho <= 0 || wo <= 0) return G3D_ERR(G3D_ERR_ARG, "conv2d: input %dx%d too small for kernel %d", w, h, k);
+    size_t plane = (size_t)ho * wo;
+    int kk = cin * k * k;
+    if (b) fill_bias(y, b, cout, plane);
+    if (k == 1 && stride == 1 && pad == 0) {
+        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, cout, (int)plane, cin, 1.0f, wt, cin, x, (int)plane,
+                    b ? 1.0f : 0.0f, y, (int)plane);
+        return G3D_OK;
+    }
+    /* im2col over bands of output rows, so the scratch stays small and hot in cache instead
+     * of holding cin*k*k copies of the whole image. */
+    int band = (int)((size_t)(1 << 21) / ((size_t)kk * wo));
+    band = band < 1 ? 1 : band > ho ? ho : band;
+    size_t cols = (size_t)band * wo;
+    float *col = malloc(sizeof(float) * (size_t)kk * cols);
+    if (!col) return G3D_ERR(G3D_ERR_NOMEM, "conv2d: cannot allocate %zu MB of scratch", sizeof(float) * kk * cols >> 20);
+    for (int y0 = 0; y0 < ho; y0 += band) {
+        int nr = ho - y0 < band ? ho - y0 : band, nc = nr * wo;
+        /* col[(c*k + ky)*k + kx, (oy - y0)*wo + ox] = x[c, oy*s - pad + ky, ox*s - pad + kx] or 0 outside. */
+#pragma omp parallel for schedule(static)
+        for (int r = 0; r < kk; r++) {
+            int c = r / (k * k), ky = (r / k) % k, kx = r % k;
+            float *dst = col + (size_t)r * nc;
+            const float *src = x + (size_t)c * h * w;
+            for (int oy = y0; oy < y0 + nr; oy++) {
+                int iy = oy * stride - pad + ky;
+                float *row = dst + (size_t)(oy - y0) * wo;
+                if (iy < 0 || iy >= h) {
+                    memset(row, 0, sizeof(float) * (size_t)wo);
+                    continue;
+                }
+                const float *srow = src + (size_t)iy * w;
+                for (int ox = 0; ox < wo; ox++) {
+                    int ix = ox * stride - pad + kx;
+                    row[ox] = (ix >= 0 && ix < w) ? srow[ix] : 0.0f;
+                }
+            }
+        }
+        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, cout, nc, kk, 1.0f, wt, kk, col, nc, b ? 1.0f : 0.0f,
+                    y + (size_t)y0 * wo, (int)plane);
+    }
+    free(col);
+    return G3D_OK;
+}
+
+g3d_status g3d_nn_conv_transpose2d(const float *x, int cin, int h, int w, const float *wt, const float *b,
+                                   int cout, int k, float *y)
+{
+    size_t plane = (size_t)h * w;
+    int rows = cout * k * k;
+    float *tmp = malloc(sizeof(float) * (size_t)rows * plane);
+    if (!tmp) return G3D_ERR(G3D_ERR_NOMEM, "conv_transpose2d: cannot allocate scratch");
+    /* tmp[(co*k + ky)*k + kx, y*w + x] = sum_ci wt[ci, co, ky, kx] * x[ci, y, x] */
+    cblas_sgemm(CblasRowMajor, CblasTrans, CblasNoTrans, rows, (int)plane, cin, 1.0f, wt, rows, x, (int)plane, 0.0f,
+                tmp, (int)plane);
+    int wo = w * k;
+#pragma omp parallel for schedule(static)
+    for (int r = 0; r < rows; r++) {
+        int co = r / (k * k), ky = (r / k) % k, kx = r % k;
+        float bias = b ? b[co] : 0.0f;
+        const float *src = tmp + (size_t)r * plane;
+        float *dst = y + (size_t)co * plane * k * k;
+        for (int iy = 0; iy < h; iy++)
+            for (int ix = 0; ix < w; ix++) dst[(size_t)(iy * k + ky) * wo + ix * k + kx] = src[(size_t)iy * w + ix] + bias;
+    }
+    free(tmp);
+    return G3D_OK;
+}
+
+void g3d_nn_layernorm(const float *x, int n, int c, const float *g, const float *b, float eps, float *y)
+{
+#pragma omp parallel for schedule(static)
+    for (int i = 0; i < n; i++) {
+        const float *xi = x + (size_t)i * c;
+        float *yi = y + (size_t)i * c;
+        double mean = 0, var = 0;
+        for (int j = 0; j < c; j++) mean += xi[j];
+        mean /= c;
+        for (int j = 0; j < c; j++) var += (xi[j] - mean) * (xi[j] - mean);
+        var /= c;
+        double inv = 1.0 / sqrt(var + eps);
+        for (int j = 0; j < c; j++) yi[j] = (float)((xi[j] - mean) * inv) * g[j] + b[j];
+    }
+}
+
+void g3d_nn_gelu(float *x, size_t n)
+{
+#pragma omp parallel for schedule(static)
+    for (size_t i = 0; i < n; i++) x[i] = 0.5f * x[i] * (1.0f + erff(x[i] * (float)M_SQRT1_2));
+}
+
+void g3d_nn_relu(float *x, size_t n)
+{
+    for (size_t i = 0; i < n; i++) x[i] = x[i] > 0 ? x[i] : 0.0f;
+}
+
+void g3d_nn_add(float *y, const float *x, size_t n)
+{
+    for (size_t i = 0; i < n; i++) y[i] += x[i];
+}
+
+g3d_status g3d_nn_attention(const float *qkv, int n, int heads, int hd, float scale, float *out)
+{
+    int d = heads * hd, ld = 3 * d;
+    float *s = malloc(sizeof(float) * (size_t)n * n);
+    if (!s) return G3D_ERR(G3D_ERR_NOMEM, "attention: cannot allocate %d x %d scores", n, n);
+    for (int hh = 0; hh < heads; hh++) {
+        const float *q = qkv + hh * hd, *k = qkv + d + hh * hd, *v = qkv + 2 * d + hh * hd;
+        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, n, n, hd, scale, q, ld, k, ld, 0.0f, s, n);
+#pragma omp parallel for schedule(static)
+        for (int i = 0; i < n; i++) {
+            float *row = s + (size_t)i * n;
+            float m = row[0];
+            for (int j = 1; j < n; j++) m = row[j] > m ? row[j] : m;
+            double sum = 0;
+            for (int j = 0; j < n; j++) {
+                row[j] = expf(row[j] - m);
+                sum += row[j];
+            }
+            float inv = (float)(1.0 / sum);
+            for (int j = 0; j < n; j++) row[j] *= inv;
+        }
+        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, n, hd, n, 1.0f, s, n, v, ld, 0.0f, out + hh * hd, d);
+    }
+    free(s);
+    return G3D_OK;
+}

@@ -1,0 +1,53 @@
+/* gen3d depth: relative depth of one image with Depth Anything V2. */
+#include "cli.h"
+#include "gen3d/depth_anything.h"
+#include "gen3d/depthio.h"
+#include "gen3d/image.h"
+#include "gen3d/imageio.h"
+
+#include <stdio.h>
+
+static const char *DESCRIPTION =
+    "Predicts relative depth for one image with Depth Anything V2 (ViT-S/B/L), loaded from the\n"
+    "official checkpoint (depth_anything_v2_vits.pth, or a safetensors file with the same tensor\n"
+    "names). The output is the network's relative inverse depth (larger = nearer, arbitrary scale,\n"
+    "not metres) at the image's resolution, saved by extension: .npy or .pfm (float32), .png\n"
+    "(16-bit, value x 1000, rounded).";
+
+static int run(int argc, char **argv)
+{
+    g3d_cli_common common;
+    const char *model = NULL, *input = NULL;
+    int input_size = 518;
+    g3d_cli_common_init(&common);
+    common.output = NULL;
+    g3d_opt opts[] = {
+        {'m', "model", G3D_OPT_STRING, &model, "CKPT", "Depth Anything V2 checkpoint (.pth or .safetensors)"},
+        {'i', "input", G3D_OPT_STRING, &input, "IMAGE", "input image (.png, .jpg)"},
+        {0, "input-size", G3D_OPT_INT, &input_size, "N", "network input size (shorter side, rounded to 14)"},
+        G3D_COMMON_OPTS(&common),
+    };
+    const char *pos[1];
+    int npos, prc = g3d_cli_parse(argc, argv, opts, G3D_COUNTOF(opts), "gen3d depth -m CKPT -i IMAGE -o OUT", DESCRIPTION,
+                                  pos, 0, &npos);
+    if (prc) return prc < 0 ? G3D_EXIT_OK : prc;
+    if (!model || !input || !common.output) return g3d_cli_errorf(G3D_EXIT_USAGE, "-m, -i and -o are required");
+    if (input_size < 14 || input_size > 8192) return g3d_cli_errorf(G3D_EXIT_USAGE, "--input-size must be in 14..8192");
+    g3d_cli_common_apply(&common);
+
+    g3d_image img = {0}, depth = {0};
+    g3d_dav2 *m = NULL;
+    g3d_status rc = g3d_image_load(input, 3, &img);
+    if (rc == G3D_OK) rc = g3d_dav2_load_file(model, &m);
+    if (rc == G3D_OK) rc = g3d_image_create(&depth, img.w, img.h, 1);
+    if (rc == G3D_OK) rc = g3d_dav2_predict(m, img.data, img.w, img.h, input_size, depth.data, NULL);
+    if (rc == G3D_OK) rc = g3d_depth_save(common.output, &depth);
+    g3d_dav2_free(m);
+    g3d_image_free(&img);
+    g3d_image_free(&depth);
+    if (rc != G3D_OK) return g3d_cli_fail(rc);
+    printf("%s\n", common.output);
+    return G3D_EXIT_OK;
+}
+
+const g3d_command g3d_cmd_depth = {"depth", "relative depth of an image with Depth Anything V2", run};

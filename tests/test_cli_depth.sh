@@ -1,0 +1,38 @@
+#!/bin/sh
+# gen3d depth: output at the image's size, deterministic, refusals leave nothing behind.
+set -u
+T="$G3D_TEST_TMP/cli_depth"
+rm -rf "$T"; mkdir -p "$T"
+pass=0; fail=0
+ok()  { pass=$((pass + 1)); echo "ok   $1"; }
+bad() { fail=$((fail + 1)); echo "FAIL $1"; }
+expect() {
+    code=$1; name=$2; shift 2
+    "$@" >"$T/out" 2>"$T/err"; rc=$?
+    if [ "$rc" -eq "$code" ]; then ok "$name"; else bad "$name (exit $rc, expected $code)"; sed 's/^/    /' "$T/err"; fi
+}
+W="$G3D_SHARED_DIR/golden/depth_anything_v2_vits/weights.safetensors"
+I="$G3D_SHARED_DIR/testdata/demo_inputs/images/ld_Image012_whitecat.jpg"
+
+expect 0 "depth help" "$GEN3D" depth --help
+grep -q -- "--input-size" "$T/out" && ok "help shows --input-size" || bad "help shows --input-size"
+expect 0 "depth npy" "$GEN3D" depth -q -t 2 -m "$W" -i "$I" -o "$T/a.npy" --input-size 140
+[ "$(cat "$T/out")" = "$T/a.npy" ] && ok "prints its output" || bad "prints its output"
+expect 0 "info on result" "$GEN3D" info "$T/a.npy"
+grep -q "(512, 512)" "$T/out" && ok "output has the image's size" || bad "output has the image's size"
+expect 0 "depth again" "$GEN3D" depth -q -t 2 -m "$W" -i "$I" -o "$T/b.npy" --input-size 140
+cmp -s "$T/a.npy" "$T/b.npy" && ok "deterministic" || bad "deterministic"
+expect 0 "depth pfm" "$GEN3D" depth -q -t 2 -m "$W" -i "$I" -o "$T/a.pfm" --input-size 140
+[ -s "$T/a.pfm" ] && ok "pfm written" || bad "pfm written"
+
+expect 2 "missing model" "$GEN3D" depth -i "$I" -o "$T/c.npy"
+expect 2 "bad input size" "$GEN3D" depth -m "$W" -i "$I" -o "$T/c.npy" --input-size 3
+expect 1 "image as checkpoint" "$GEN3D" depth -q -m "$I" -i "$I" -o "$T/c.npy"
+grep -q "whitecat.jpg" "$T/err" && ok "error names the file" || bad "error names the file"
+expect 1 "wrong checkpoint" "$GEN3D" depth -q -m "$G3D_SHARED_DIR/golden/depth_anything_v2_vits/activations.safetensors" -i "$I" -o "$T/c.npy"
+grep -q "depth_head" "$T/err" && ok "error names the tensor" || bad "error names the tensor"
+expect 1 "missing image" "$GEN3D" depth -q -m "$W" -i "$T/nope.png" -o "$T/c.npy"
+[ ! -e "$T/c.npy" ] && ok "no output after failures" || bad "no output after failures"
+
+echo "$pass passed, $fail failed"
+[ "$fail" -eq 0 ]

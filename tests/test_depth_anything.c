@@ -1,0 +1,118 @@
+/* Depth Anything V2 ViT-S against the official PyTorch activations (seeded weights) in
+ * shared/golden/depth_anything_v2_vits: every recorded tensor, from the raw image on. */
+#include "testutil.h"
+
+#include "gen3d/depth_anything.h"
+
+#define GOLDEN "golden/depth_anything_v2_vits/"
+#define TOL 1e-4
+
+static double rel_l2(const float *got, const float *ref, size_t n)
+{
+    double num = 0, den = 0;
+    for (size_t i = 0; i < n; i++) {
+        double d = (double)got[i] - ref[i];
+        num += d * d;
+        den += (double)ref[i] * ref[i];
+    }
+    return sqrt(num / (den > 0 ? den : 1));
+}
+
+/* Compares `got` with golden tensor `name`, whose element count must be n. */
+static void compare(const g3d_ckpt *act, const char *name, const float *got, size_t n)
+{
+    const g3d_tensor_info *t = g3d_ckpt_find(act, name);
+    CHECK_MSG(t && (size_t)t->numel == n, "%s: missing or %lld elements, expected %zu", name,
+              t ? (long long)t->numel : -1LL, n);
+    if (!t || (size_t)t->numel != n || !got) return;
+    float *ref = NULL;
+    CHECK_OK(g3d_ckpt_read_alloc(act, name, 0, NULL, &ref));
+    if (!ref) return;
+    double e = rel_l2(got, ref, n);
+    printf("  %-18s rel L2 %.3e\n", name, e);
+    CHECK_MSG(e <= TOL, "%s: relative L2 error %.3e > %g", name, e, TOL);
+    free(ref);
+}
+
+TEST(golden_vits)
+{
+    g3d_ckpt *act = NULL, *wts = NULL;
+    CHECK_OK(g3d_ckpt_open(test_shared(GOLDEN "activations.safetensors"), &act));
+    CHECK_OK(g3d_ckpt_open(test_shared(GOLDEN "weights.safetensors"), &wts));
+    if (!act || !wts) goto out;
+    g3d_dav2 *m = NULL;
+    CHECK_OK(g3d_dav2_load(wts, &m));
+    const g3d_tensor_info *img = g3d_ckpt_find(act, "input.image_rgb_u8");
+    CHECK(img && img->ndim == 3 && img->shape[2] == 3);
+    if (!m || !img) goto out;
+    int h = (int)img->shape[0], w = (int)img->shape[1];
+    size_t npx = (size_t)w * h;
+    float *rgb = malloc(sizeof(float) * npx * 3), *depth = malloc(sizeof(float) * npx);
+    CHECK_OK(g3d_ckpt_read(act, "input.image_rgb_u8", 0, NULL, rgb));
+    for (size_t i = 0; i < npx * 3; i++) rgb[i] /= 255.0f;
+    g3d_dav2_trace tr = {.want = 1};
+    CHECK_OK(g3d_dav2_predict(m, rgb, w, h, 196, depth, &tr));
+    CHECK(tr.net_w == 294 && tr.net_h == 196);
+    if (tr.input) {
+        size_t np = (size_t)(tr.net_w / 14) * (tr.net_h / 14), D = 384;
+        compare(act, "input.tensor", tr.input, 3 * (size_t)tr.net_w * tr.net_h);
+        compare(act, "out.patch_embed", tr.backbone.patch_embed, np * D);
+        static const int blocks[] = {0, 2, 5, 8, 11};
+        char name[64];
+        for (int i = 0; i < 5; i++) {
+            snprintf(name, sizeof name, "out.block%d", blocks[i]);
+            compare(act, name, tr.backbone.block[blocks[i]], (np + 1) * D);
+        }
+        for (int i = 0; i < 4; i++) {
+            snprintf(name, sizeof name, "out.feature%d", i);
+            compare(act, name, tr.feature[i], np * D);
+        }
+        for (int i = 3; i >= 0; i--) {
+            snprintf(name, sizeof name, "out.path_%d", i + 1);
+            compare(act, name, tr.path[i], (size_t)64 * tr.path_h[i] * tr.path_w[i]);
+        }
+        compare(act, "out.depth", tr.depth, (size_t)tr.net_w * tr.net_h);
+        compare(act, "out.depth_full", depth, npx);
+    }
+    g3d_dav2_trace_free(&tr);
+    free(rgb);
+    free(depth);
+    g3d_dav2_free(m);
+out:
+    g3d_ckpt_free(act);
+    g3d_ckpt_free(wts);
+}
+
+TEST(net_size_rule)
+{
+    int w, h;
+    /* official lower_bound rule: COCO 640x480 at 518 -> 686x518; the golden 640x425 at 196 -> 294x196 */
+    CHECK_OK(g3d_dav2_net_size(640, 480, 518, &w, &h));
+    CHECK(w == 686 && h == 518);
+    CHECK_OK(g3d_dav2_net_size(640, 425, 196, &w, &h));
+    CHECK(w == 294 && h == 196);
+    CHECK_OK(g3d_dav2_net_size(100, 1000, 518, &w, &h)); /* 518 x 5180: both sides >= 518 */
+    CHECK(w == 518 && h == 5180);
+    CHECK_FAILS(g3d_dav2_net_size(0, 10, 518, &w, &h));
+    CHECK_FAILS(g3d_dav2_net_size(40000, 10, 518, &w, &h));
+    CHECK_FAILS(g3d_dav2_net_size(640, 480, 5, &w, &h));
+    CHECK_FAILS(g3d_dav2_net_size(10, 32768, 518, &w, &h)); /* would need a 1700000-wide input */
+}
+
+TEST(wrong_checkpoint_refused)
+{
+    g3d_dav2 *m = (g3d_dav2 *)1;
+    CHECK_FAILS(g3d_dav2_load_file(test_shared(GOLDEN "activations.safetensors"), &m));
+    CHECK(m == NULL);
+    CHECK(strstr(g3d_error_message(), "depth_head.scratch.layer1_rn.weight") != NULL);
+    CHECK_FAILS(g3d_dav2_load_file(test_shared(GOLDEN "README.md"), &m));
+    CHECK(m == NULL);
+}
+
+int main(void)
+{
+    RUN(net_size_rule);
+    RUN(wrong_checkpoint_refused);
+    RUN(golden_vits);
+    return test_summary();
+}
