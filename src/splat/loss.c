@@ -1,0 +1,168 @@
+/* loss.c - masked L1 + SSIM loss with its analytic gradient, and masked PSNR. */
+#include "gen3d/loss.h"
+
+#include <math.h>
+#include <stdlib.h>
+
+#define WIN 11
+#define HALF 5
+#define SSIM_C1 (0.01 * 0.01)
+#define SSIM_C2 (0.03 * 0.03)
+
+static void gauss_window(double k[WIN])
+{
+    double s = 0;
+    for (int i = 0; i < WIN; i++) {
+        double d = i - HALF;
+        k[i] = exp(-d * d / (2.0 * 1.5 * 1.5));
+        s += k[i];
+    }
+    for (int i = 0; i < WIN; i++) k[i] /= s;
+}
+
+/* Separable 'same' filtering with zero padding; the kernel is symmetric, so this operator is
+ * self-adjoint and serves the backward pass unchanged. tmp: w*h scratch. */
+static void blur(const double *in, double *out, double *tmp, int w, int h, const double k[WIN])
+{
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            double s = 0;
+            for (int i = -HALF; i <= HALF; i++) {
+                int xx = x + i;
+                if (xx >= 0 && xx < w) s += k[i + HALF] * in[(size_t)y * w + xx];
+            }
+            tmp[(size_t)y * w + x] = s;
+        }
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            double s = 0;
+            for (int i = -HALF; i <= HALF; i++) {
+                int yy = y + i;
+                if (yy >= 0 && yy < h) s += k[i + HALF] * tmp[(size_t)yy * w + x];
+            }
+            out[(size_t)y * w + x] = s;
+        }
+}
+
+static g3d_status check_inputs(const g3d_image *pred, const g3d_image *target,
+                               const g3d_image *mask, int64_t *nvalid)
+{
+    if (!pred || !target || !pred->data || !target->data)
+        return G3D_ERR(G3D_ERR_ARG, "loss: empty image");
+    if (pred->w != target->w || pred->h != target->h || pred->c != target->c)
+        return G3D_ERR(G3D_ERR_MISMATCH, "loss: prediction %dx%dx%d vs target %dx%dx%d",
+                       pred->w, pred->h, pred->c, target->w, target->h, target->c);
+    size_t np = (size_t)pred->w * pred->h;
+    if (mask) {
+        if (mask->w != pred->w || mask->h != pred->h || mask->c != 1)
+            return G3D_ERR(G3D_ERR_MISMATCH, "loss: mask %dx%dx%d vs image %dx%d (1 channel expected)",
+                           mask->w, mask->h, mask->c, pred->w, pred->h);
+        int64_t n = 0;
+        for (size_t i = 0; i < np; i++) n += mask->data[i] > 0.5f;
+        *nvalid = n;
+    } else {
+        *nvalid = (int64_t)np;
+    }
+    if (*nvalid == 0) return G3D_ERR(G3D_ERR_ARG, "loss: the mask has no valid pixel");
+    return G3D_OK;
+}
+
+static int valid(const g3d_image *mask, size_t i) { return !mask || mask->data[i] > 0.5f; }
+
+g3d_status g3d_loss_fwd_bwd(const g3d_image *pred, const g3d_image *target,
+                            const g3d_image *mask, double lambda, double *loss, double *ssim,
+                            g3d_image *grad)
+{
+    int64_t nvalid;
+    G3D_TRY(check_inputs(pred, target, mask, &nvalid));
+    if (!(lambda >= 0 && lambda <= 1))
+        return G3D_ERR(G3D_ERR_ARG, "loss: SSIM weight %g outside [0, 1]", lambda);
+    if (grad && (grad->w != pred->w || grad->h != pred->h || grad->c != pred->c || !grad->data))
+        return G3D_ERR(G3D_ERR_MISMATCH, "loss: gradient image does not match the prediction");
+
+    const int w = pred->w, h = pred->h, c = pred->c;
+    const size_t np = (size_t)w * h;
+    /* planes: p, t, mu1, mu2, e11, e22, e12, tmp, and 3 backward weights */
+    double *buf = g3d_calloc(np, 11 * sizeof(double), "loss scratch");
+    if (!buf) return G3D_ERR_NOMEM;
+    double *p = buf, *t = p + np, *mu1 = t + np, *mu2 = mu1 + np, *e11 = mu2 + np,
+           *e22 = e11 + np, *e12 = e22 + np, *tmp = e12 + np, *wa = tmp + np, *wb = wa + np,
+           *wc = wb + np;
+    double k[WIN];
+    gauss_window(k);
+    const double count = (double)nvalid * c;
+    double l1 = 0, ssim_sum = 0;
+
+    for (int ch = 0; ch < c; ch++) {
+        for (size_t i = 0; i < np; i++) {
+            p[i] = pred->data[i * c + ch];
+            t[i] = target->data[i * c + ch];
+            if (valid(mask, i)) l1 += fabs(p[i] - t[i]);
+        }
+        blur(p, mu1, tmp, w, h, k);
+        blur(t, mu2, tmp, w, h, k);
+        for (size_t i = 0; i < np; i++) wa[i] = p[i] * p[i];
+        blur(wa, e11, tmp, w, h, k);
+        for (size_t i = 0; i < np; i++) wa[i] = t[i] * t[i];
+        blur(wa, e22, tmp, w, h, k);
+        for (size_t i = 0; i < np; i++) wa[i] = p[i] * t[i];
+        blur(wa, e12, tmp, w, h, k);
+
+        for (size_t i = 0; i < np; i++) {
+            double m1 = mu1[i], m2 = mu2[i];
+            double s11 = e11[i] - m1 * m1, s22 = e22[i] - m2 * m2, s12 = e12[i] - m1 * m2;
+            double A = 2 * m1 * m2 + SSIM_C1, B = 2 * s12 + SSIM_C2;
+            double C = m1 * m1 + m2 * m2 + SSIM_C1, D = s11 + s22 + SSIM_C2;
+            double s = A * B / (C * D);
+            if (valid(mask, i)) {
+                ssim_sum += s;
+                /* dL/dssim = -lambda / count; chain through mu1, E[p^2], E[pt] */
+                double ws = -lambda / count;
+                double dmu1 = (2 * m2 * B - 2 * m2 * A) / (C * D) - s * 2 * m1 / C + s * 2 * m1 / D;
+                wa[i] = ws * dmu1;
+                wb[i] = ws * (-s / D);
+                wc[i] = ws * (2 * A / (C * D));
+            } else {
+                wa[i] = wb[i] = wc[i] = 0;
+            }
+        }
+        if (grad) {
+            blur(wa, mu1, tmp, w, h, k); /* mu1/e11/e12 are no longer needed */
+            blur(wb, e11, tmp, w, h, k);
+            blur(wc, e12, tmp, w, h, k);
+            for (size_t i = 0; i < np; i++) {
+                double g = mu1[i] + 2 * p[i] * e11[i] + t[i] * e12[i];
+                if (valid(mask, i)) {
+                    double d = p[i] - t[i];
+                    g += (1 - lambda) * (d > 0 ? 1.0 : d < 0 ? -1.0 : 0.0) / count;
+                }
+                grad->data[i * c + ch] = (float)g;
+            }
+        }
+    }
+    double mean_ssim = ssim_sum / count;
+    *loss = (1 - lambda) * (l1 / count) + lambda * (1 - mean_ssim);
+    if (ssim) *ssim = mean_ssim;
+    free(buf);
+    return G3D_OK;
+}
+
+g3d_status g3d_psnr(const g3d_image *pred, const g3d_image *target, const g3d_image *mask,
+                    double *psnr)
+{
+    int64_t nvalid;
+    G3D_TRY(check_inputs(pred, target, mask, &nvalid));
+    const int c = pred->c;
+    const size_t np = (size_t)pred->w * pred->h;
+    double se = 0;
+    for (size_t i = 0; i < np; i++) {
+        if (!valid(mask, i)) continue;
+        for (int ch = 0; ch < c; ch++) {
+            double d = (double)pred->data[i * c + ch] - target->data[i * c + ch];
+            se += d * d;
+        }
+    }
+    double mse = se / ((double)nvalid * c);
+    *psnr = mse > 0 ? 10.0 * log10(1.0 / mse) : INFINITY;
+    return G3D_OK;
+}
