@@ -23,7 +23,9 @@
  * Round-trip error bounds (decode(encode(g)) vs g, see tests/test_spz.c): position 2^-13 m;
  * colour DC 1/(2*0.15*255) = 0.0131; log scale 1/32; SH rest 4.5/128 (band 1) or 8.5/128 (higher)
  * for values in [-1, 1]; opacity 0.5/255 after the sigmoid; quaternion components about 0.01
- * (w is recomputed from x, y, z). Values outside a field's range are clamped.
+ * (w is recomputed from x, y, z, so precision drops for rotations near 180 degrees:
+ * |q.q'| >= 0.995 in the worst case, the known weakness of version 2). Values outside a
+ * field's range are clamped.
  */
 #ifndef G3D_SPZ_H
 #define G3D_SPZ_H
