@@ -1,0 +1,152 @@
+/* Initial Gaussians from a point cloud; the scale comes from a 3-nearest-neighbour search on a
+ * uniform grid (cells of about 2 points each, searched in growing shells). */
+#include "gen3d/raster.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct grid {
+    double lo[3], cell;
+    int64_t dim[3];
+    int64_t *start;   /* (cells + 1) */
+    int64_t *idx;     /* (n) point ids sorted by cell */
+} grid;
+
+static int64_t cell_coord(const grid *gr, double v, int a)
+{
+    int64_t c = (int64_t)floor((v - gr->lo[a]) / gr->cell);
+    return c < 0 ? 0 : c >= gr->dim[a] ? gr->dim[a] - 1 : c;
+}
+
+/* Keeps the three smallest squared distances in best[0..2] (ascending). */
+static void push_best(double best[3], double d2)
+{
+    if (d2 >= best[2]) return;
+    best[2] = d2;
+    if (best[2] < best[1]) { double t = best[1]; best[1] = best[2]; best[2] = t; }
+    if (best[1] < best[0]) { double t = best[0]; best[0] = best[1]; best[1] = t; }
+}
+
+/* Mean of the squared distances to the (up to) 3 nearest other points of point i. */
+static double knn3_mean_d2(const grid *gr, const float *xyz, int64_t n, int64_t i)
+{
+    double best[3] = {DBL_MAX, DBL_MAX, DBL_MAX};
+    const float *p = xyz + 3 * i;
+    int64_t c[3];
+    for (int a = 0; a < 3; a++) c[a] = cell_coord(gr, p[a], a);
+    int64_t maxr = gr->dim[0];
+    if (gr->dim[1] > maxr) maxr = gr->dim[1];
+    if (gr->dim[2] > maxr) maxr = gr->dim[2];
+    const int want = n - 1 < 3 ? (int)(n - 1) : 3;
+    for (int64_t r = 0; r <= maxr; r++) {
+        /* visit the shell at Chebyshev distance r */
+        for (int64_t z = c[2] - r; z <= c[2] + r; z++) {
+            if (z < 0 || z >= gr->dim[2]) continue;
+            for (int64_t y = c[1] - r; y <= c[1] + r; y++) {
+                if (y < 0 || y >= gr->dim[1]) continue;
+                int on_face = z == c[2] - r || z == c[2] + r || y == c[1] - r || y == c[1] + r;
+                for (int64_t x = c[0] - r; x <= c[0] + r; x += (on_face || r == 0) ? 1 : 2 * r) {
+                    if (x < 0 || x >= gr->dim[0]) continue;
+                    int64_t cell = (z * gr->dim[1] + y) * gr->dim[0] + x;
+                    for (int64_t k = gr->start[cell]; k < gr->start[cell + 1]; k++) {
+                        int64_t j = gr->idx[k];
+                        if (j == i) continue;
+                        const float *q = xyz + 3 * j;
+                        double dx = (double)q[0] - p[0], dy = (double)q[1] - p[1], dz = (double)q[2] - p[2];
+                        push_best(best, dx * dx + dy * dy + dz * dz);
+                    }
+                }
+            }
+        }
+        /* every point outside shells 0..r is farther than r cells from p */
+        if (want == 0) break;
+        if (best[want - 1] < DBL_MAX && sqrt(best[want - 1]) <= r * gr->cell) break;
+    }
+    if (want == 0) return 0.0;
+    double s = 0;
+    for (int k = 0; k < want; k++) s += best[k];
+    return s / want;
+}
+
+g3d_status g3d_gaussians_init_from_points(g3d_gaussians *g, const float *xyz, const float *rgb,
+                                          int64_t n, int sh_degree)
+{
+    if (n < 1) return G3D_ERR(G3D_ERR_ARG, "init from points: empty point cloud");
+    if (sh_degree < 0 || sh_degree > G3D_SH_MAX_DEGREE)
+        return G3D_ERR(G3D_ERR_ARG, "init from points: SH degree %d out of range 0..%d", sh_degree, G3D_SH_MAX_DEGREE);
+    grid gr;
+    memset(&gr, 0, sizeof gr);
+    double hi[3];
+    for (int a = 0; a < 3; a++) { gr.lo[a] = DBL_MAX; hi[a] = -DBL_MAX; }
+    for (int64_t i = 0; i < n; i++)
+        for (int a = 0; a < 3; a++) {
+            double v = xyz[3 * i + a];
+            if (!isfinite(v) || !isfinite(rgb[3 * i + a]))
+                return G3D_ERR(G3D_ERR_ARG, "init from points: point %lld is not finite", (long long)i);
+            if (v < gr.lo[a]) gr.lo[a] = v;
+            if (v > hi[a]) hi[a] = v;
+        }
+    /* cell size for ~2 points per cell of the bounding box, at most ~n cells in all */
+    double vol = 1.0, ext[3];
+    int flat = 0;
+    for (int a = 0; a < 3; a++) {
+        ext[a] = hi[a] - gr.lo[a];
+        if (ext[a] > 0) vol *= ext[a]; else flat++;
+    }
+    double cell = flat == 3 ? 1.0 : pow(vol * 2.0 / (double)n, 1.0 / (3 - flat));
+    double maxext = fmax(ext[0], fmax(ext[1], ext[2]));
+    if (!(cell > 0) || cell < maxext * 1e-6) cell = maxext > 0 ? maxext * 1e-6 : 1.0;
+    gr.cell = cell;
+    int64_t cells = 1;
+    for (int a = 0; a < 3; a++) {
+        gr.dim[a] = (int64_t)(ext[a] / cell) + 1;
+        cells *= gr.dim[a];
+    }
+    while (cells > 4 * n + 64) {   /* very flat or elongated clouds: coarsen */
+        gr.cell *= 2;
+        cells = 1;
+        for (int a = 0; a < 3; a++) { gr.dim[a] = (int64_t)(ext[a] / gr.cell) + 1; cells *= gr.dim[a]; }
+    }
+    gr.start = calloc((size_t)cells + 1, sizeof(int64_t));
+    gr.idx = malloc(sizeof(int64_t) * (size_t)n);
+    int64_t *cellof = malloc(sizeof(int64_t) * (size_t)n);
+    g3d_status rc = G3D_OK;
+    if (!gr.start || !gr.idx || !cellof) { rc = G3D_ERR(G3D_ERR_NOMEM, "init from points: out of memory"); goto done; }
+    for (int64_t i = 0; i < n; i++) {
+        const float *p = xyz + 3 * i;
+        cellof[i] = (cell_coord(&gr, p[2], 2) * gr.dim[1] + cell_coord(&gr, p[1], 1)) * gr.dim[0] + cell_coord(&gr, p[0], 0);
+        gr.start[cellof[i] + 1]++;
+    }
+    for (int64_t c = 0; c < cells; c++) gr.start[c + 1] += gr.start[c];
+    {
+        int64_t *cur = malloc(sizeof(int64_t) * (size_t)cells);
+        if (!cur) { rc = G3D_ERR(G3D_ERR_NOMEM, "init from points: out of memory"); goto done; }
+        memcpy(cur, gr.start, sizeof(int64_t) * (size_t)cells);
+        for (int64_t i = 0; i < n; i++) gr.idx[cur[cellof[i]]++] = i;
+        free(cur);
+    }
+    rc = g3d_gaussians_create(g, n, sh_degree);
+    if (rc != G3D_OK) goto done;
+    g->n = n;
+    const int K = G3D_SH_COEFFS(sh_degree);
+    const float logit = logf(0.1f / 0.9f);
+#pragma omp parallel for schedule(dynamic, 256)
+    for (int64_t i = 0; i < n; i++) {
+        double d2 = knn3_mean_d2(&gr, xyz, n, i);
+        float ls = (float)log(sqrt(fmax(d2, 1e-7)));
+        for (int a = 0; a < 3; a++) {
+            g->means[3 * i + a] = xyz[3 * i + a];
+            g->log_scales[3 * i + a] = ls;
+            g->sh[(size_t)i * K * 3 + a] = (rgb[3 * i + a] - 0.5f) / G3D_SH_C0;
+        }
+        g->rots[4 * i] = 1.0f;
+        g->opacity_logits[i] = logit;
+    }
+done:
+    free(gr.start);
+    free(gr.idx);
+    free(cellof);
+    return rc;
+}
