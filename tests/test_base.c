@@ -106,6 +106,25 @@ TEST(atomic_dir)
     free(f);
     free(tmp);
 
+    /* A folder of the user's that is not empty and not ours is never replaced. */
+    char *mine = g3d_path_join(test_tmp(""), "users_folder");
+    g3d_remove_tree(mine);
+    g3d_mkdirs(mine);
+    char *keep = g3d_path_join(mine, "precious.txt");
+    g3d_write_file_atomic(keep, "x", 1);
+    CHECK_OK(g3d_atomic_dir_begin(mine, &tmp));
+    CHECK_FAILS(g3d_atomic_dir_commit(tmp, mine));
+    CHECK(test_file_exists(keep));
+    g3d_atomic_dir_abort(tmp);
+    free(tmp);
+    free(keep);
+    g3d_remove_tree(mine);
+    free(mine);
+    /* Our own earlier output is replaced. */
+    CHECK_OK(g3d_atomic_dir_begin(path, &tmp));
+    CHECK_OK(g3d_atomic_dir_commit(tmp, path));
+    free(tmp);
+
     CHECK_OK(g3d_atomic_dir_begin(path, &tmp));
     g3d_atomic_dir_abort(tmp);
     CHECK(!test_file_exists(tmp));

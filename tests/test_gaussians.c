@@ -24,6 +24,7 @@ TEST(storage)
     c.rots[4 * 1 + 2] = NAN;
     CHECK_FAILS(g3d_gaussians_validate(&c, "clone"));
     CHECK(strstr(g3d_error_message(), "Gaussian 1") != NULL);
+    g3d_gaussians_free(&c);
     CHECK_FAILS(g3d_gaussians_create(&c, 1, 4));
     g3d_gaussians_free(&g);
     g3d_gaussians_free(&c);

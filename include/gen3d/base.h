@@ -181,10 +181,13 @@ void g3d_atomic_abort(g3d_atomic_file *af);
 /* Writes `n` bytes to `path` atomically. */
 g3d_status g3d_write_file_atomic(const char *path, const void *data, size_t n);
 
-/* Atomic output folders: g3d_atomic_dir_begin creates "<path>.tmp-<pid>" (fresh, empty) and
- * returns its name in *tmp_out (caller frees); the caller writes files into it, then
- * g3d_atomic_dir_commit replaces `path` by it (an existing `path` folder is removed first, only
- * if it looks like one of ours or is empty). g3d_atomic_dir_abort removes the temporary folder. */
+/* Atomic output folders: g3d_atomic_dir_begin creates "<path>.tmp-<pid>" holding only the
+ * marker file G3D_OUTPUT_MARKER and returns its name in *tmp_out (caller frees); the caller
+ * writes files into it, then g3d_atomic_dir_commit moves it to `path`. An existing `path` is
+ * replaced only if it is empty or an earlier gen3d output (has the marker); any other folder
+ * is an error, so a mistyped -o never deletes a user's files. g3d_atomic_dir_abort removes the
+ * temporary folder. */
+#define G3D_OUTPUT_MARKER ".gen3d"
 g3d_status g3d_atomic_dir_begin(const char *path, char **tmp_out);
 g3d_status g3d_atomic_dir_commit(const char *tmp, const char *path);
 void       g3d_atomic_dir_abort(const char *tmp);

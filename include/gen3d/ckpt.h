@@ -50,9 +50,17 @@ typedef struct g3d_tensor_info {
 
 typedef struct g3d_ckpt g3d_ckpt;   /* opaque */
 
-/* Opens a .safetensors or PyTorch zip checkpoint (detected from the content, not the name).
- * On success *out owns the mapping and the index; free with g3d_ckpt_free. */
+/* Opens a checkpoint file, detected from its content (not its name): safetensors, or a PyTorch
+ * zip checkpoint (.pth/.pt/.ckpt). The file is memory-mapped; tensors point into it. PyTorch
+ * naming rule: tensors are named by their dotted path in the saved object; when exactly one
+ * top-level dict entry holds tensors and it is a dict (e.g. {'model': state_dict,
+ * 'model_config': {...}}), that key is left out, so tensors keep their state-dict names.
+ * Only contiguous tensors in uncompressed little-endian storages are accepted. On success
+ * *out owns the mapping and the index; free with g3d_ckpt_free. */
 g3d_status g3d_ckpt_open(const char *path, g3d_ckpt **out);
+/* The same over a caller-owned buffer of n bytes that must outlive the checkpoint; `label`
+ * names it in messages. */
+g3d_status g3d_ckpt_open_memory(const void *data, size_t n, const char *label, g3d_ckpt **out);
 void g3d_ckpt_free(g3d_ckpt *ck);
 
 /* The path given to open (for messages). */
@@ -72,6 +80,13 @@ g3d_status g3d_ckpt_read_alloc(const g3d_ckpt *ck, const char *name, int ndim, c
 
 /* Converts n elements of type t at src to float32. */
 void g3d_dtype_to_f32(g3d_dtype t, const void *src, float *dst, int64_t n);
+
+/* Total number of elements over all tensors (the parameter count of a state dict). */
+int64_t g3d_ckpt_numel(const g3d_ckpt *ck);
+
+/* The architecture recognised from tensor names and shapes, e.g. "Depth Anything V2 (vits:
+ * ViT-S/14, 12 blocks, width 384)", or NULL if unknown. Written into buf. */
+const char *g3d_ckpt_arch(const g3d_ckpt *ck, char *buf, size_t n);
 
 /* Non-tensor content as JSON (safetensors: the __metadata__ object; PyTorch: the unpickled
  * top-level object with every tensor replaced by its name). NULL if there is none. Owned by

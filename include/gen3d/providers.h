@@ -32,9 +32,11 @@ typedef struct g3d_depth_estimator {
     void *ctx;
     /* rgb: (h, w, 3). known: (h, w, 1) metric depth of pixels already known (0 = unknown),
      * or NULL. mask: (h, w, 1), 1 = pixels whose depth is wanted, or NULL for all.
-     * depth_out: created by the callee, (h, w, 1) metres; pixels outside the mask are copied
-     * from `known`. K_io: on input the camera if known (fx > 0), else zeroed; estimators
-     * that predict intrinsics fill it when it was unknown. May be NULL. */
+     * depth_out: created by the callee, (h, w, 1) metres: the estimator's own estimate for
+     * every pixel (a model predicts all of them, so that the caller can measure where it
+     * disagrees with `known` and align it; completion returns `known` unchanged where given).
+     * K_io: on input the camera if known (fx > 0), else zeroed; estimators that predict
+     * intrinsics fill it when it was unknown. May be NULL. */
     g3d_status (*estimate)(void *ctx, const g3d_image *rgb, const g3d_image *known, const g3d_image *mask,
                            g3d_image *depth_out, g3d_intrinsics *K_io);
     void (*free)(void *ctx);

@@ -198,8 +198,35 @@ g3d_status g3d_atomic_dir_begin(const char *path, char **tmp_out)
         free(tmp);
         return G3D_ERR(G3D_ERR_IO, "%s: cannot create output folder next to it", path);
     }
+    /* The marker lets a later run replace this folder without risking a user's own folder. */
+    char *marker = g3d_path_join(tmp, G3D_OUTPUT_MARKER);
+    g3d_status rc = marker ? g3d_write_file_atomic(marker, "gen3d output\n", 13) : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    free(marker);
+    if (rc != G3D_OK) {
+        g3d_remove_tree(tmp);
+        free(tmp);
+        return rc;
+    }
     *tmp_out = tmp;
     return G3D_OK;
+}
+
+/* An existing folder may be replaced if it is empty or carries our marker. */
+static int replaceable_dir(const char *path)
+{
+    struct stat st;
+    char *marker = g3d_path_join(path, G3D_OUTPUT_MARKER);
+    int ok = marker && stat(marker, &st) == 0;
+    free(marker);
+    if (ok) return 1;
+    DIR *d = opendir(path);
+    struct dirent *e;
+    if (!d) return 0;
+    ok = 1;
+    while ((e = readdir(d)) != NULL)
+        if (strcmp(e->d_name, ".") && strcmp(e->d_name, "..")) ok = 0;
+    closedir(d);
+    return ok;
 }
 
 g3d_status g3d_atomic_dir_commit(const char *tmp, const char *path)
@@ -208,6 +235,8 @@ g3d_status g3d_atomic_dir_commit(const char *tmp, const char *path)
     if (lstat(path, &st) == 0) {
         if (!S_ISDIR(st.st_mode))
             return G3D_ERR(G3D_ERR_IO, "%s: exists and is not a folder", path);
+        if (!replaceable_dir(path))
+            return G3D_ERR(G3D_ERR_IO, "%s: folder exists and is not an earlier gen3d output; choose another name", path);
         G3D_TRY(g3d_remove_tree(path));
     }
     if (rename(tmp, path) != 0)

@@ -1,0 +1,49 @@
+/* gen3d/align.h - aligning the depth of a newly generated view to the existing cloud
+ * (the Gen3d paper, section 3.2).
+ *
+ * The new view's depth (from a depth model or completion) is consistent within itself but
+ * not with the cloud. Where the rendered cloud covers the view (mask M = 1) and touches a
+ * hole (|grad M| > 0), the cloud's depth along the pixel's ray and the new depth describe the
+ * same surface: their ratio is the correction needed there. New points may only move along
+ * their camera rays (so the inpainted colours stay where they are drawn), so the correction
+ * is a per-pixel depth factor. Outlier correspondences (median/MAD test on the log ratio) are
+ * dropped; the log-ratio is then interpolated over the holes with the boundary values held
+ * fixed: a plane fitted to the boundary values plus a harmonic residual (membrane.h), so a
+ * correction that varies across the view keeps its trend into wide holes at the image border
+ * instead of being forced to zero there (LucidDreamer pins zero correction at the image
+ * corners). The existing side is not changed.
+ */
+#ifndef G3D_ALIGN_H
+#define G3D_ALIGN_H
+
+#include "gen3d/image.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct g3d_align_params {
+    float outlier_mads;     /* reject |r - median| > this x 1.4826 MAD (3.0) */
+    float max_ratio;        /* ignore correspondences whose depths differ by more than this factor (3.0) */
+} g3d_align_params;
+g3d_align_params g3d_align_params_default(void);
+
+typedef struct g3d_align_stats {
+    int64_t correspondences;     /* boundary pixels used */
+    int64_t rejected;            /* dropped as outliers */
+    double residual_before;      /* mean |new - cloud| / cloud over the correspondences */
+    double residual_after;       /* the same after alignment (0 when all are kept: they are pinned) */
+    double median_ratio;         /* median cloud/new depth ratio */
+} g3d_align_stats;
+
+/* depth_new (h, w, 1): the new view's full depth, corrected in place at the hole pixels
+ * (mask < 0.5). depth_cloud, mask (h, w, 1): the cloud rendered into the view. If there is no
+ * usable correspondence, the median-free fallback is to leave depth_new unchanged (stats say
+ * so). stats may be NULL. */
+g3d_status g3d_align_depth(g3d_image *depth_new, const g3d_image *depth_cloud, const g3d_image *mask,
+                           const g3d_align_params *p, g3d_align_stats *stats);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* G3D_ALIGN_H */

@@ -1,0 +1,72 @@
+/* gen3d/frame.h - the input of the pipeline: one RGB image with metric depth and a camera.
+ *
+ * A frame is what every later stage starts from: RGB in [0, 1], depth in metres (0 =
+ * invalid) of the same size, pinhole intrinsics, and the pose of the input camera (the
+ * identity: the scene's world frame is this camera's frame, see camera.h). A frame may also
+ * carry a real held-out second view with its camera, used to measure novel-view quality.
+ */
+#ifndef G3D_FRAME_H
+#define G3D_FRAME_H
+
+#include "gen3d/camera.h"
+#include "gen3d/image.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct g3d_frame {
+    g3d_image rgb;        /* (h, w, 3) */
+    g3d_image depth;      /* (h, w, 1) metres, 0 = invalid */
+    g3d_camera cam;       /* intrinsics of rgb, pose = identity */
+    g3d_image heldout;    /* optional (h2, w2, 3) real second view; empty if none */
+    g3d_camera heldout_cam;
+    char name[64];        /* short label, e.g. "middlebury-motorcycle" */
+} g3d_frame;
+
+void g3d_frame_free(g3d_frame *f);
+
+/* Checks that rgb and depth agree in size, that depth has valid pixels, and that the
+ * intrinsics match the image. `label` names the input in messages. */
+g3d_status g3d_frame_validate(const g3d_frame *f, const char *label);
+
+/* RGB file + depth file (any format of depthio.h; `depth_scale` as in g3d_depth_load) + the
+ * camera: K.fx > 0 gives the focal length (K.fy <= 0: same as fx; K.cx, K.cy < 0: the image
+ * centre); otherwise fov_deg > 0 gives the horizontal field of view; otherwise 60 degrees is
+ * assumed and logged. K's width and height are taken from the image. */
+g3d_status g3d_frame_load_rgbd(const char *rgb_path, const char *depth_path, double depth_scale,
+                               g3d_intrinsics K, double fov_deg, g3d_frame *f);
+
+/* The built-in default input: Middlebury 2014 "Motorcycle" (the copy that scikit-image ships,
+ * 741 x 500) from folder `dir`, holding motorcycle_left.png, motorcycle_right.png and
+ * motorcycle_disp.npz (or the names im0.png, im1.png). Depth comes from the ground-truth
+ * disparity and the calibration (f = 994.978 px, cx0 = 311.193, cy = 254.877,
+ * doffs = 31.086 px, baseline 193.001 mm); the right image becomes the held-out view, a pure
+ * translation of +0.193001 m along x with its own principal point cx1 = cx0 + doffs. */
+g3d_status g3d_frame_load_middlebury(const char *dir, g3d_frame *f);
+
+/* Lifts every `stride`-th pixel with valid depth to a coloured world point (the frame's
+ * camera is the world frame). *out is created by the call. */
+struct g3d_points;
+g3d_status g3d_frame_to_points(const g3d_frame *f, int stride, struct g3d_points *out);
+
+/* Writes the frame as a folder: rgb.png, depth.png (16-bit mm), depth.npy (metres),
+ * cameras.json (the input camera, then the held-out camera if any), heldout.png, and
+ * points.ply (the lifted cloud). Atomic: nothing is left at `dir` on failure. */
+g3d_status g3d_frame_save(const g3d_frame *f, const char *dir);
+
+/* Downscales the frame so that its longer side is at most max_side (no-op if it already is):
+ * colour by area averaging, depth by nearest sampling (no invented depths at edges), the
+ * intrinsics accordingly; the held-out view likewise. */
+g3d_status g3d_frame_limit_size(g3d_frame *f, int max_side);
+
+#define G3D_MIDDLEBURY_F 994.978
+#define G3D_MIDDLEBURY_CX0 311.193
+#define G3D_MIDDLEBURY_CY 254.877
+#define G3D_MIDDLEBURY_DOFFS 31.086
+#define G3D_MIDDLEBURY_BASELINE_M 0.193001
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* G3D_FRAME_H */

@@ -1,0 +1,74 @@
+/* gen3d/layers.h - splitting the input into a foreground and a background layer (the Gen3d
+ * paper, section 3.1), and the weight-free region proposals it uses without a segmentation
+ * model.
+ *
+ * Selection (as the paper applies it to SAM masks): keep candidate masks with score >
+ * min_score and area within [min_area, max_area] of the image; the foreground is the union
+ * of those whose median depth is below theta_d, the `percentile` quantile of the depth map,
+ * and that stand in front of their surroundings: at least `min_occluding` of the mask's
+ * boundary pixels have a neighbour outside that is deeper by more than 5 %. (Without this
+ * test, patches of floor, ceiling or a wall close to the camera would count as objects.)
+ * The background layer is the input with the foreground removed: its colour is inpainted and
+ * its depth completed behind the foreground, so that moving the camera reveals plausible
+ * background rather than holes.
+ *
+ * Weight-free proposals (g3d_mask_provider_regions): the scene's large planes (floor, walls,
+ * ceiling, ground; each explaining at least `min_plane` of the image) are found by RANSAC on
+ * the points lifted from depth and set aside as structure; the remaining pixels split into
+ * 4-connected components across depth-continuous neighbours, and each component is one
+ * proposal. An object resting on the floor is thus cut from it where the floor plane ends,
+ * while its own faces stay together.
+ */
+#ifndef G3D_LAYERS_H
+#define G3D_LAYERS_H
+
+#include "gen3d/providers.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct g3d_regions_params {
+    float min_plane;      /* a structure plane explains at least this fraction of the image (0.10) */
+    float plane_tol;      /* inlier distance to a plane, relative to depth (0.012) */
+    float jump;           /* neighbours further apart than this fraction of depth are disconnected (0.03) */
+    int max_planes;       /* structure planes to remove at most (6) */
+    int ransac_iters;     /* plane hypotheses per plane (300) */
+    int min_size;         /* smallest proposal in pixels (7) */
+} g3d_regions_params;
+g3d_regions_params g3d_regions_params_default(void);
+
+/* Region proposals as a mask provider. Needs the camera intrinsics (for normals); K is
+ * copied. params NULL = defaults. Free with provider.free(provider.ctx). */
+g3d_status g3d_mask_provider_regions(const g3d_regions_params *params, g3d_intrinsics K, g3d_mask_provider *out);
+
+typedef struct g3d_layers_params {
+    float min_score;      /* 0.85 (SAM's predicted IoU threshold in the paper) */
+    float min_area;       /* 0.005 of the image */
+    float max_area;       /* 0.60 of the image */
+    float percentile;     /* theta_d = this quantile of the valid depth (0.35) */
+    float min_occluding;  /* fraction of the boundary that must occlude something (0.3) */
+    int dilate;           /* grow the foreground by this many pixels before inpainting (2) */
+} g3d_layers_params;
+g3d_layers_params g3d_layers_params_default(void);
+
+typedef struct g3d_layers {
+    g3d_image fg_mask;    /* (h, w, 1) 1 = foreground */
+    g3d_image bg_rgb;     /* (h, w, 3) background with the foreground inpainted */
+    g3d_image bg_depth;   /* (h, w, 1) background depth, completed behind the foreground */
+    int n_candidates, n_kept, n_foreground;
+    float theta_d;
+} g3d_layers;
+void g3d_layers_free(g3d_layers *l);
+
+/* Computes the layers of (rgb, depth). masks proposes candidates; inpaint fills the
+ * background colour; depth_fill completes the background depth (called with the depth
+ * outside the foreground as `known` and the foreground as `mask`). */
+g3d_status g3d_layers_compute(const g3d_image *rgb, const g3d_image *depth, const g3d_mask_provider *masks,
+                              const g3d_inpainter *inpaint, const g3d_depth_estimator *depth_fill,
+                              const g3d_layers_params *p, uint64_t seed, g3d_layers *out);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* G3D_LAYERS_H */

@@ -1,0 +1,47 @@
+/* gen3d/resize.h - image resampling with the exact conventions of the tools that models were
+ * trained with.
+ *
+ *   G3D_RESIZE_BILINEAR          PyTorch F.interpolate(mode='bilinear', align_corners=False):
+ *                                src = (dst + 0.5) * in/out - 0.5, negative clamped to 0.
+ *   G3D_RESIZE_BILINEAR_AC       the same with align_corners=True: src = dst * (in-1)/(out-1).
+ *   G3D_RESIZE_CUBIC_OPENCV      OpenCV cv2.resize INTER_CUBIC: Keys cubic with a = -0.75, taps
+ *                                at floor(src)-1 .. +2, indices clamped (border replicate), no
+ *                                antialiasing when shrinking.
+ *   G3D_RESIZE_CUBIC_HALF        the same mapping with a = -0.5 (Catmull-Rom / PIL's kernel).
+ *   G3D_RESIZE_AREA              box filter with fractional pixel coverage (OpenCV INTER_AREA
+ *                                when shrinking); when enlarging it falls back to bilinear.
+ *   G3D_RESIZE_NEAREST           the source pixel whose centre is nearest (for depth and masks,
+ *                                where averaging across an edge would invent values).
+ *
+ * All modes are separable (rows first, then columns) and computed in double precision.
+ * Channels are interleaved and resized independently.
+ */
+#ifndef G3D_RESIZE_H
+#define G3D_RESIZE_H
+
+#include "gen3d/image.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef enum g3d_resize_mode {
+    G3D_RESIZE_BILINEAR,
+    G3D_RESIZE_BILINEAR_AC,
+    G3D_RESIZE_CUBIC_OPENCV,
+    G3D_RESIZE_CUBIC_HALF,
+    G3D_RESIZE_AREA,
+    G3D_RESIZE_NEAREST,
+    G3D_RESIZE_MODE_COUNT
+} g3d_resize_mode;
+
+/* Resizes a (sh, sw, c) interleaved buffer into (dh, dw, c) at dst (caller-allocated). */
+g3d_status g3d_resize_buffer(const float *src, int sw, int sh, int c, float *dst, int dw, int dh, g3d_resize_mode mode);
+
+/* Resizes src into a new image *dst of dw x dh (same channels). */
+g3d_status g3d_image_resize(const g3d_image *src, int dw, int dh, g3d_resize_mode mode, g3d_image *dst);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* G3D_RESIZE_H */

@@ -1,0 +1,31 @@
+/* input_opts.h - the options that choose the pipeline's input frame, shared by the commands
+ * that take one (prepare, world). */
+#ifndef G3D_INPUT_OPTS_H
+#define G3D_INPUT_OPTS_H
+
+#include "cli.h"
+#include "gen3d/frame.h"
+
+typedef struct g3d_cli_input {
+    const char *rgb, *depth, *default_dir;
+    double scale, fx, fy, cx, cy, fov;
+} g3d_cli_input;
+
+#define G3D_INPUT_OPTS(in)                                                                                        \
+    {'i', "input", G3D_OPT_STRING, &(in)->rgb, "RGB", "colour image (PNG or JPEG); without it: the default input"}, \
+    {0, "depth", G3D_OPT_STRING, &(in)->depth, "DEPTH", "depth map (.png .pfm .npy .npz)"},                       \
+    {0, "depth-scale", G3D_OPT_DOUBLE, &(in)->scale, "S", "16-bit PNG / integer depth units per metre (1000 mm, 5000 TUM)"}, \
+    {0, "fx", G3D_OPT_DOUBLE, &(in)->fx, "PX", "focal length x in pixels"},                                        \
+    {0, "fy", G3D_OPT_DOUBLE, &(in)->fy, "PX", "focal length y in pixels (default: fx)"},                          \
+    {0, "cx", G3D_OPT_DOUBLE, &(in)->cx, "PX", "principal point x (default: image centre)"},                       \
+    {0, "cy", G3D_OPT_DOUBLE, &(in)->cy, "PX", "principal point y (default: image centre)"},                       \
+    {0, "fov", G3D_OPT_DOUBLE, &(in)->fov, "DEG", "horizontal field of view instead of --fx (default 60)"},        \
+    {0, "default-input", G3D_OPT_STRING, &(in)->default_dir, "DIR", "folder of the default input (Middlebury Motorcycle)"}
+
+void g3d_cli_input_init(g3d_cli_input *in);
+/* Usage checks; returns 0 or G3D_EXIT_USAGE after printing the problem. */
+int g3d_cli_input_check(const g3d_cli_input *in);
+/* Loads the frame the options describe. */
+g3d_status g3d_cli_input_load(const g3d_cli_input *in, g3d_frame *f);
+
+#endif

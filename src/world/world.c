@@ -1,0 +1,282 @@
+/* The world-generation loop and its dataset writer. */
+#include "gen3d/world.h"
+#include "gen3d/cameras_json.h"
+#include "gen3d/depthio.h"
+#include "gen3d/imageio.h"
+#include "gen3d/trajectory.h"
+
+#include <cjson/cJSON.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+g3d_world_params g3d_world_params_default(void)
+{
+    g3d_world_params p;
+    memset(&p, 0, sizeof p);
+    p.extra_views = 10;
+    p.extra_angle_deg = 5.0;
+    p.render = g3d_render_params_default();
+    p.align = g3d_align_params_default();
+    p.layers = g3d_layers_params_default();
+    return p;
+}
+
+void g3d_world_free(g3d_world *w)
+{
+    if (!w) return;
+    g3d_cloud_free(&w->cloud);
+    for (int i = 0; i < w->n_views; i++) {
+        if (w->rgb) g3d_image_free(&w->rgb[i]);
+        if (w->depth) g3d_image_free(&w->depth[i]);
+    }
+    for (int i = 0; i < w->n_extra; i++) {
+        if (w->extra_rgb) g3d_image_free(&w->extra_rgb[i]);
+        if (w->extra_mask) g3d_image_free(&w->extra_mask[i]);
+    }
+    free(w->cams); free(w->rgb); free(w->depth); free(w->steps);
+    free(w->extra_cams); free(w->extra_rgb); free(w->extra_mask);
+    g3d_layers_free(&w->layers);
+    memset(w, 0, sizeof *w);
+}
+
+static int cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+double g3d_depth_median(const g3d_image *depth)
+{
+    size_t n = g3d_image_size(depth), k = 0;
+    float *v = malloc(sizeof(float) * (n ? n : 1));
+    if (!v) return 0;
+    for (size_t i = 0; i < n; i++) if (depth->data[i] > 0) v[k++] = depth->data[i];
+    double m = 0;
+    if (k) { qsort(v, k, sizeof *v, cmp_float); m = v[k / 2]; }
+    free(v);
+    return m;
+}
+
+/* Step 0: the input, and with layers the background hidden behind its foreground. */
+static g3d_status lift_input(g3d_world *w, const g3d_frame *in, const g3d_inpainter *inpaint,
+                             const g3d_depth_estimator *depth, const g3d_mask_provider *masks, const g3d_world_params *p,
+                             uint64_t seed)
+{
+    G3D_TRY(g3d_cloud_lift(&w->cloud, &in->rgb, &in->depth, &w->cams[0], NULL, 0, &w->steps[0].points_added));
+    if (masks) {
+        G3D_TRY(g3d_layers_compute(&in->rgb, &in->depth, masks, inpaint, depth, &p->layers, seed, &w->layers));
+        if (w->layers.n_foreground) {
+            int64_t added;
+            G3D_TRY(g3d_cloud_lift(&w->cloud, &w->layers.bg_rgb, &w->layers.bg_depth, &w->cams[0], &w->layers.fg_mask, 0, &added));
+            w->steps[0].points_added += added;
+        }
+    }
+    G3D_TRY(g3d_image_clone(&w->rgb[0], &in->rgb));
+    return g3d_image_clone(&w->depth[0], &in->depth);
+}
+
+/* One generation step at pose i. */
+static g3d_status world_step(g3d_world *w, int i, const g3d_inpainter *inpaint, const g3d_depth_estimator *depth,
+                             const g3d_world_params *p, uint64_t seed)
+{
+    g3d_world_step *st = &w->steps[i];
+    const g3d_camera *cam = &w->cams[i];
+    g3d_image rgb = {0}, cloud_d = {0}, mask = {0}, holes = {0}, est = {0};
+    double t = g3d_time_now();
+    g3d_status rc = g3d_cloud_render(&w->cloud, cam, &p->render, &rgb, &cloud_d, &mask);
+    st->seconds_reproject = g3d_time_now() - t;
+    if (rc != G3D_OK) goto done;
+    size_t n = g3d_image_size(&mask), nh = 0;
+    if ((rc = g3d_image_create(&holes, mask.w, mask.h, 1)) != G3D_OK) goto done;
+    for (size_t k = 0; k < n; k++) { holes.data[k] = mask.data[k] < 0.5f; nh += mask.data[k] < 0.5f; }
+    st->hole_fraction = (double)nh / n;
+    if (nh == n) {
+        rc = G3D_ERR(G3D_ERR_ARG, "trajectory pose %d sees none of the scene (it leaves the scene entirely); use a shorter path", i);
+        goto done;
+    }
+    t = g3d_time_now();
+    if (nh) rc = inpaint->inpaint(inpaint->ctx, &rgb, &holes, NULL, seed + (uint64_t)i * 7919u);
+    st->seconds_inpaint = g3d_time_now() - t;
+    if (rc != G3D_OK) goto done;
+    t = g3d_time_now();
+    g3d_intrinsics K = cam->K;
+    rc = depth->estimate(depth->ctx, &rgb, &cloud_d, nh ? &holes : NULL, &est, &K);
+    st->seconds_depth = g3d_time_now() - t;
+    if (rc != G3D_OK) goto done;
+    t = g3d_time_now();
+    if (nh) rc = g3d_align_depth(&est, &cloud_d, &mask, &p->align, &st->align);
+    st->seconds_align = g3d_time_now() - t;
+    if (rc != G3D_OK) goto done;
+    /* The view keeps the cloud's depth where the cloud covered it: only the holes are new. */
+    for (size_t k = 0; k < n; k++) if (mask.data[k] >= 0.5f) est.data[k] = cloud_d.data[k];
+    t = g3d_time_now();
+    if (nh) rc = g3d_cloud_lift(&w->cloud, &rgb, &est, cam, &holes, i, &st->points_added);
+    st->seconds_lift = g3d_time_now() - t;
+    if (rc != G3D_OK) goto done;
+    w->rgb[i] = rgb;
+    w->depth[i] = est;
+    rgb.data = est.data = NULL;
+done:
+    g3d_image_free(&rgb);
+    g3d_image_free(&cloud_d);
+    g3d_image_free(&mask);
+    g3d_image_free(&holes);
+    g3d_image_free(&est);
+    return rc;
+}
+
+g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int n_poses, const g3d_inpainter *inpaint,
+                              const g3d_depth_estimator *depth, const g3d_mask_provider *masks,
+                              const g3d_world_params *p, uint64_t seed, g3d_world *out)
+{
+    g3d_world_params def = g3d_world_params_default();
+    if (!p) p = &def;
+    memset(out, 0, sizeof *out);
+    if (n_poses < 1 || n_poses > 10000) return G3D_ERR(G3D_ERR_ARG, "world: %d poses (need 1..10000)", n_poses);
+    if (p->extra_views < 0 || p->extra_views > 10000) return G3D_ERR(G3D_ERR_ARG, "world: %d extra views (need 0..10000)", p->extra_views);
+    G3D_TRY(g3d_frame_validate(input, input->name[0] ? input->name : "input"));
+    g3d_status rc = g3d_cloud_init(&out->cloud);
+    out->cams = calloc((size_t)n_poses, sizeof *out->cams);
+    out->rgb = calloc((size_t)n_poses, sizeof *out->rgb);
+    out->depth = calloc((size_t)n_poses, sizeof *out->depth);
+    out->steps = calloc((size_t)n_poses, sizeof *out->steps);
+    if (rc == G3D_OK && (!out->cams || !out->rgb || !out->depth || !out->steps)) rc = G3D_ERR(G3D_ERR_NOMEM, "world: out of memory");
+    out->n_views = n_poses;
+    for (int i = 0; i < n_poses && rc == G3D_OK; i++) {
+        out->cams[i].K = input->cam.K;
+        out->cams[i].c2w = g3d_mat4_mul(input->cam.c2w, poses[i]);
+    }
+    if (rc == G3D_OK) rc = lift_input(out, input, inpaint, depth, masks, p, seed);
+    g3d_progress_report(&p->progress, "world", 1, n_poses, NULL);
+    for (int i = 1; i < n_poses && rc == G3D_OK; i++) {
+        rc = world_step(out, i, inpaint, depth, p, seed);
+        char info[96];
+        snprintf(info, sizeof info, "holes %.1f %%, %lld points", 100.0 * out->steps[i].hole_fraction, (long long)out->cloud.n);
+        if (rc == G3D_OK && g3d_progress_report(&p->progress, "world", i + 1, n_poses, info))
+            rc = G3D_ERR(G3D_ERR_ARG, "world generation cancelled");
+    }
+    /* Extra views: orbits around the poses, rendered from the final cloud, not inpainted. */
+    if (rc == G3D_OK && p->extra_views > 0) {
+        int per = (p->extra_views + n_poses - 1) / n_poses;
+        if (per > 5) per = 5;
+        g3d_mat4 *orb = NULL;
+        int norb = 0;
+        double pivot = g3d_depth_median(&input->depth);
+        rc = g3d_trajectory_orbits(poses, n_poses, per, pivot > 0 ? pivot : 1.0, p->extra_angle_deg, &orb, &norb);
+        int m = p->extra_views < norb ? p->extra_views : norb;
+        if (rc == G3D_OK) {
+            out->extra_cams = calloc((size_t)(m ? m : 1), sizeof *out->extra_cams);
+            out->extra_rgb = calloc((size_t)(m ? m : 1), sizeof *out->extra_rgb);
+            out->extra_mask = calloc((size_t)(m ? m : 1), sizeof *out->extra_mask);
+            if (!out->extra_cams || !out->extra_rgb || !out->extra_mask) rc = G3D_ERR(G3D_ERR_NOMEM, "world: out of memory");
+        }
+        for (int k = 0; k < m && rc == G3D_OK; k++) {
+            /* Spread the views over the poses: pose k % n, orbit k / n. */
+            int pose = k % n_poses, j = k / n_poses;
+            out->extra_cams[k].K = input->cam.K;
+            out->extra_cams[k].c2w = g3d_mat4_mul(input->cam.c2w, orb[pose * per + j]);
+            rc = g3d_cloud_render(&out->cloud, &out->extra_cams[k], &p->render, &out->extra_rgb[k], NULL, &out->extra_mask[k]);
+            if (rc == G3D_OK) out->n_extra = k + 1;
+            g3d_progress_report(&p->progress, "extra views", k + 1, m, NULL);
+        }
+        free(orb);
+    }
+    if (rc != G3D_OK) g3d_world_free(out);
+    return rc;
+}
+
+/* ---- dataset ------------------------------------------------------------------------------ */
+
+static g3d_status save_in(const char *dir, const char *name, g3d_status (*fn)(const char *, const g3d_image *), const g3d_image *img)
+{
+    char *p = g3d_path_join(dir, name);
+    if (!p) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    g3d_status rc = fn(p, img);
+    free(p);
+    return rc;
+}
+
+static g3d_status save_png8(const char *path, const g3d_image *img) { return g3d_image_save_png(path, img, 8); }
+
+static cJSON *step_json(int i, const g3d_world_step *s)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddNumberToObject(o, "step", i);
+    cJSON_AddNumberToObject(o, "hole_fraction", s->hole_fraction);
+    cJSON_AddNumberToObject(o, "points_added", (double)s->points_added);
+    cJSON_AddNumberToObject(o, "correspondences", (double)s->align.correspondences);
+    cJSON_AddNumberToObject(o, "outliers", (double)s->align.rejected);
+    cJSON_AddNumberToObject(o, "residual_before", s->align.residual_before);
+    cJSON_AddNumberToObject(o, "residual_after", s->align.residual_after);
+    cJSON_AddNumberToObject(o, "median_depth_ratio", s->align.median_ratio);
+    return o;
+}
+
+g3d_status g3d_world_save(const g3d_world *w, const char *dir, uint64_t seed)
+{
+    char *tmp = NULL, *sub = NULL, name[96];
+    g3d_camera_list cams = {0};
+    g3d_points pts = {0};
+    g3d_status rc = g3d_atomic_dir_begin(dir, &tmp);
+    if (rc != G3D_OK) return rc;
+    static const char *const folders[] = {"views", "depth", "extra", "masks", "layers"};
+    for (int f = 0; f < 5 && rc == G3D_OK; f++) {
+        sub = g3d_path_join(tmp, folders[f]);
+        rc = sub ? g3d_mkdirs(sub) : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+        free(sub);
+    }
+    if (rc == G3D_OK) rc = g3d_camera_list_create(&cams, w->n_views + w->n_extra);
+    for (int i = 0; i < w->n_views && rc == G3D_OK; i++) {
+        snprintf(name, sizeof name, "views/view_%03d.png", i);
+        rc = save_in(tmp, name, save_png8, &w->rgb[i]);
+        cams.cams[i] = w->cams[i];
+        if (rc == G3D_OK) rc = g3d_camera_list_set_name(&cams, i, name);
+        snprintf(name, sizeof name, "depth/view_%03d.png", i);
+        if (rc == G3D_OK) rc = save_in(tmp, name, g3d_depth_save, &w->depth[i]);
+        snprintf(name, sizeof name, "depth/view_%03d.npy", i);
+        if (rc == G3D_OK) rc = save_in(tmp, name, g3d_depth_save, &w->depth[i]);
+    }
+    for (int k = 0; k < w->n_extra && rc == G3D_OK; k++) {
+        int i = w->n_views + k;
+        snprintf(name, sizeof name, "extra/extra_%03d.png", k);
+        rc = save_in(tmp, name, save_png8, &w->extra_rgb[k]);
+        cams.cams[i] = w->extra_cams[k];
+        if (rc == G3D_OK) rc = g3d_camera_list_set_name(&cams, i, name);
+        snprintf(name, sizeof name, "masks/extra_%03d.png", k);
+        if (rc == G3D_OK) rc = save_in(tmp, name, save_png8, &w->extra_mask[k]);
+        if (rc == G3D_OK) rc = g3d_camera_list_set_mask(&cams, i, name);
+    }
+    if (rc == G3D_OK && w->layers.fg_mask.data) {
+        rc = save_in(tmp, "layers/fg_mask.png", save_png8, &w->layers.fg_mask);
+        if (rc == G3D_OK) rc = save_in(tmp, "layers/bg_rgb.png", save_png8, &w->layers.bg_rgb);
+        if (rc == G3D_OK) rc = save_in(tmp, "layers/bg_depth.png", g3d_depth_save, &w->layers.bg_depth);
+    }
+    char *p;
+    if (rc == G3D_OK) { p = g3d_path_join(tmp, "cameras.json"); rc = g3d_cameras_json_write(p, &cams); free(p); }
+    if (rc == G3D_OK) { p = g3d_path_join(tmp, "transforms.json"); rc = g3d_transforms_json_write(p, &cams); free(p); }
+    if (rc == G3D_OK) rc = g3d_cloud_to_points(&w->cloud, &pts);
+    if (rc == G3D_OK) { p = g3d_path_join(tmp, "points.ply"); rc = g3d_ply_write_points(p, &pts); free(p); }
+    if (rc == G3D_OK) {
+        cJSON *root = cJSON_CreateObject(), *steps = cJSON_AddArrayToObject(root, "steps");
+        cJSON_AddNumberToObject(root, "seed", (double)seed);
+        cJSON_AddNumberToObject(root, "views", w->n_views);
+        cJSON_AddNumberToObject(root, "extra_views", w->n_extra);
+        cJSON_AddNumberToObject(root, "points", (double)w->cloud.n);
+        cJSON_AddNumberToObject(root, "foreground_objects", w->layers.n_foreground);
+        for (int i = 0; i < w->n_views; i++) cJSON_AddItemToArray(steps, step_json(i, &w->steps[i]));
+        char *text = cJSON_Print(root);
+        cJSON_Delete(root);
+        p = g3d_path_join(tmp, "log.json");
+        rc = text && p ? g3d_write_file_atomic(p, text, strlen(text)) : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+        free(p);
+        free(text);
+    }
+    if (rc == G3D_OK) rc = g3d_atomic_dir_commit(tmp, dir);
+    if (rc != G3D_OK) g3d_atomic_dir_abort(tmp);
+    free(tmp);
+    g3d_camera_list_free(&cams);
+    g3d_points_free(&pts);
+    return rc;
+}

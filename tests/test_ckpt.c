@@ -1,0 +1,211 @@
+/* Checkpoints: the safetensors reader on the golden weights, every dtype, hostile headers. */
+#include "testutil.h"
+#include "gen3d/ckpt.h"
+
+#include <cjson/cJSON.h>
+
+static const char *FIX = G3D_SOURCE_DIR "/tests/fixtures/dtypes.safetensors";
+
+TEST(golden_weights)
+{
+    g3d_ckpt *ck;
+    CHECK_OK(g3d_ckpt_open(test_shared("golden/depth_anything_v2_vits/weights.safetensors"), &ck));
+    if (!ck) return;
+    CHECK(g3d_ckpt_count(ck) == 239); /* 240 header entries, one of them __metadata__ */
+    const g3d_tensor_info *t = g3d_ckpt_find(ck, "pretrained.blocks.0.attn.qkv.weight");
+    CHECK(t && t->dtype == G3D_DT_F16 && t->ndim == 2 && t->shape[0] == 1152 && t->shape[1] == 384);
+    t = g3d_ckpt_find(ck, "pretrained.pos_embed");
+    CHECK(t && t->ndim == 3 && t->shape[1] == 1370);
+    CHECK(g3d_ckpt_find(ck, "pretrained.blocks.12.attn.qkv.weight") == NULL);
+    const cJSON *meta = g3d_ckpt_meta(ck);
+    const cJSON *model = cJSON_GetObjectItemCaseSensitive(meta, "model");
+    CHECK(cJSON_IsString(model) && !strcmp(model->valuestring, "depth_anything_v2_vits"));
+    char arch[160];
+    CHECK(g3d_ckpt_arch(ck, arch, sizeof arch) && strstr(arch, "vits") && strstr(arch, "12 blocks"));
+    /* Reading with the right shape works; a wrong shape or name is an error naming it. */
+    int64_t qkv_shape[2] = {1152, 384}, wrong[2] = {384, 1152};
+    float *w = NULL;
+    CHECK_OK(g3d_ckpt_read_alloc(ck, "pretrained.blocks.0.attn.qkv.weight", 2, qkv_shape, &w));
+    double sum = 0;
+    int finite = 1;
+    for (int i = 0; w && i < 1152 * 384; i++) { sum += fabs(w[i]); finite &= isfinite(w[i]); }
+    CHECK(finite && sum > 0);
+    free(w);
+    CHECK_FAILS(g3d_ckpt_read_alloc(ck, "pretrained.blocks.0.attn.qkv.weight", 2, wrong, &w));
+    CHECK(strstr(g3d_error_message(), "[1152, 384]") && strstr(g3d_error_message(), "expected [384, 1152]"));
+    CHECK_FAILS(g3d_ckpt_read_alloc(ck, "pretrained.blocks.0.attn.qkvv.weight", 0, NULL, &w));
+    CHECK(strstr(g3d_error_message(), "qkvv") != NULL);
+    printf("  %lld tensors, %lld parameters: %s\n", (long long)g3d_ckpt_count(ck), (long long)g3d_ckpt_numel(ck), arch);
+    g3d_ckpt_free(ck);
+
+    /* The activations file: U8 image and F32 tensors. */
+    CHECK_OK(g3d_ckpt_open(test_shared("golden/depth_anything_v2_vits/activations.safetensors"), &ck));
+    if (!ck) return;
+    t = g3d_ckpt_find(ck, "input.image_rgb_u8");
+    CHECK(t && t->dtype == G3D_DT_U8 && t->shape[0] == 425 && t->shape[2] == 3);
+    float *img;
+    CHECK_OK(g3d_ckpt_read_alloc(ck, "input.image_rgb_u8", 0, NULL, &img));
+    int ints = 1;
+    for (int i = 0; img && i < 425 * 640 * 3; i++) ints &= img[i] >= 0 && img[i] <= 255 && img[i] == floorf(img[i]);
+    CHECK(ints);
+    free(img);
+    CHECK(g3d_ckpt_arch(ck, arch, sizeof arch) == NULL);
+    g3d_ckpt_free(ck);
+}
+
+TEST(every_dtype)
+{
+    g3d_ckpt *ck;
+    CHECK_OK(g3d_ckpt_open(FIX, &ck));
+    if (!ck) return;
+    float v[12];
+    const char *floats[] = {"f32", "f16", "bf16", "f64"};
+    for (int k = 0; k < 4; k++) {
+        const g3d_tensor_info *t = g3d_ckpt_find(ck, floats[k]);
+        CHECK_OK(g3d_ckpt_read(ck, floats[k], 0, NULL, v));
+        for (int i = 0; t && i < t->numel; i++) CHECK_MSG(v[i] == (float)((i - 5) * 0.75), "%s[%d] = %g", floats[k], i, v[i]);
+    }
+    CHECK_OK(g3d_ckpt_read(ck, "i64", 0, NULL, v));
+    for (int i = 0; i < 6; i++) CHECK(v[i] == (float)(i - 3));
+    int64_t s23[2] = {2, 3};
+    CHECK_OK(g3d_ckpt_read(ck, "i32", 2, s23, v));
+    CHECK(v[0] == -3 && v[5] == 2);
+    CHECK_OK(g3d_ckpt_read(ck, "u8", 0, NULL, v));
+    CHECK(v[5] == 200);
+    CHECK_OK(g3d_ckpt_read(ck, "bool", 0, NULL, v));
+    CHECK(v[0] == 1 && v[1] == 0 && v[3] == 1);
+    CHECK_OK(g3d_ckpt_read(ck, "f16_special", 0, NULL, v));
+    CHECK(v[0] == ldexpf(1, -24) && v[1] == 0 && signbit(v[1]) && isinf(v[2]) && v[2] > 0 && isinf(v[3]) && v[3] < 0);
+    CHECK(v[4] == 65504.0f && v[5] == ldexpf(1, -14));
+    const g3d_tensor_info *e = g3d_ckpt_find(ck, "empty");
+    CHECK(e && e->numel == 0 && e->ndim == 2);
+    g3d_ckpt_free(ck);
+}
+
+/* Builds a safetensors buffer from a header string and n data bytes. */
+static size_t make(unsigned char *buf, const char *header, size_t data_bytes)
+{
+    size_t h = strlen(header);
+    for (int i = 0; i < 8; i++) buf[i] = (unsigned char)(h >> (8 * i));
+    memcpy(buf + 8, header, h);
+    memset(buf + 8 + h, 0x3c, data_bytes);
+    return 8 + h + data_bytes;
+}
+
+TEST(hostile_headers)
+{
+    unsigned char buf[4096];
+    g3d_ckpt *ck;
+    size_t n = make(buf, "{\"a\":{\"dtype\":\"F32\",\"shape\":[2],\"data_offsets\":[0,8]}}", 8);
+    CHECK_OK(g3d_ckpt_open_memory(buf, n, "ok.safetensors", &ck));
+    g3d_ckpt_free(ck);
+    struct { const char *name, *header; size_t data; } cases[] = {
+        {"not JSON", "{\"a\": [1, 2", 8},
+        {"not an object", "[1, 2, 3]", 8},
+        {"dtype/shape/bytes mismatch", "{\"a\":{\"dtype\":\"F32\",\"shape\":[3],\"data_offsets\":[0,8]}}", 8},
+        {"offsets past the end", "{\"a\":{\"dtype\":\"F32\",\"shape\":[2],\"data_offsets\":[8,16]}}", 8},
+        {"reversed offsets", "{\"a\":{\"dtype\":\"U8\",\"shape\":[0],\"data_offsets\":[8,0]}}", 8},
+        {"overlap", "{\"a\":{\"dtype\":\"F32\",\"shape\":[2],\"data_offsets\":[0,8]},\"b\":{\"dtype\":\"F32\",\"shape\":[1],\"data_offsets\":[4,8]}}", 8},
+        {"unknown dtype", "{\"a\":{\"dtype\":\"F8_E4M3\",\"shape\":[2],\"data_offsets\":[0,2]}}", 8},
+        {"negative dimension", "{\"a\":{\"dtype\":\"F32\",\"shape\":[-2],\"data_offsets\":[0,8]}}", 8},
+        {"absurd shape", "{\"a\":{\"dtype\":\"F32\",\"shape\":[1000000,1000000,1000000],\"data_offsets\":[0,8]}}", 8},
+        {"fractional offset", "{\"a\":{\"dtype\":\"F32\",\"shape\":[2],\"data_offsets\":[0.5,8.5]}}", 9},
+        {"missing offsets", "{\"a\":{\"dtype\":\"F32\",\"shape\":[2]}}", 8},
+        {"metadata not strings", "{\"__metadata__\":{\"x\":1},\"a\":{\"dtype\":\"F32\",\"shape\":[2],\"data_offsets\":[0,8]}}", 8},
+        {"two metadata objects", "{\"__metadata__\":{\"x\":\"1\"},\"__metadata__\":{\"y\":\"2\"}}", 0},
+        {"duplicate name", "{\"a\":{\"dtype\":\"F32\",\"shape\":[1],\"data_offsets\":[0,4]},\"a\":{\"dtype\":\"F32\",\"shape\":[1],\"data_offsets\":[4,8]}}", 8},
+    };
+    for (size_t k = 0; k < sizeof cases / sizeof *cases; k++) {
+        n = make(buf, cases[k].header, cases[k].data);
+        printf("  %s:\n", cases[k].name);
+        CHECK_FAILS(g3d_ckpt_open_memory(buf, n, "bad.safetensors", &ck));
+    }
+    /* Header length beyond the end of the file, and a truncated file. */
+    n = make(buf, "{\"a\":{\"dtype\":\"F32\",\"shape\":[2],\"data_offsets\":[0,8]}}", 8);
+    buf[3] = 0x7f;
+    CHECK_FAILS(g3d_ckpt_open_memory(buf, n, "len.safetensors", &ck));
+    CHECK_FAILS(g3d_ckpt_open_memory(buf, 5, "short.safetensors", &ck));
+    /* Files on disk: missing, empty, and a zip (PyTorch) refused with a clear message. */
+    CHECK_FAILS(g3d_ckpt_open(test_tmp("missing.safetensors"), &ck));
+    FILE *f = fopen(test_tmp("empty.safetensors"), "wb");
+    fclose(f);
+    CHECK_FAILS(g3d_ckpt_open(test_tmp("empty.safetensors"), &ck));
+    CHECK_FAILS(g3d_ckpt_open_memory("PK\x03\x04rest-of-a-zip", 18, "model.pth", &ck));
+}
+
+#define FIXDIR G3D_SOURCE_DIR "/tests/fixtures/"
+
+TEST(pytorch_zip)
+{
+    g3d_ckpt *ck;
+    CHECK_OK(g3d_ckpt_open(FIXDIR "state.pth", &ck));
+    if (!ck) return;
+    /* {'model': state_dict, 'model_config': {...}, 'epoch': 7}: state-dict names, no wrapper. */
+    CHECK(g3d_ckpt_count(ck) == 9);
+    float v[20];
+    const char *floats[] = {"encoder.weight", "encoder.bias", "encoder.norm.weight", "head.0.weight"};
+    for (int k = 0; k < 4; k++) {
+        const g3d_tensor_info *t = g3d_ckpt_find(ck, floats[k]);
+        CHECK_MSG(t != NULL, "%s missing", floats[k]);
+        if (!t) continue;
+        CHECK_OK(g3d_ckpt_read(ck, floats[k], 0, NULL, v));
+        for (int i = 0; i < t->numel; i++) CHECK_MSG(v[i] == (float)((i - 5) * 0.75), "%s[%d] = %g", floats[k], i, v[i]);
+    }
+    int64_t s34[2] = {3, 4};
+    CHECK_OK(g3d_ckpt_read(ck, "encoder.weight", 2, s34, v));
+    /* A view 8 elements into a storage it shares with another tensor. */
+    CHECK_OK(g3d_ckpt_read(ck, "view", 0, NULL, v));
+    CHECK(v[0] == (float)((8 - 5) * 0.75) && v[5] == (float)((13 - 5) * 0.75));
+    const g3d_tensor_info *sc = g3d_ckpt_find(ck, "scalar");
+    CHECK(sc && sc->ndim == 0 && sc->numel == 1);
+    CHECK_OK(g3d_ckpt_read(ck, "head.0.steps", 0, NULL, v));
+    CHECK(v[0] == -2 && v[4] == 2);
+    CHECK_OK(g3d_ckpt_read(ck, "mask", 0, NULL, v));
+    CHECK(v[0] == 1 && v[1] == 0);
+    /* Everything else is JSON. */
+    const cJSON *cfg = cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "model_config");
+    const cJSON *dim = cJSON_GetObjectItemCaseSensitive(cfg, "dim");
+    CHECK(cJSON_IsArray(dim) && cJSON_GetArrayItem(dim, 0)->valuedouble == 384);
+    CHECK(cJSON_IsString(cJSON_GetObjectItemCaseSensitive(cfg, "encoder")));
+    CHECK(cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(cfg, "use_norm")) && cJSON_IsNull(cJSON_GetObjectItemCaseSensitive(cfg, "extra")));
+    CHECK(cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "epoch")->valuedouble == 7);
+    g3d_ckpt_free(ck);
+
+    /* The MoGe-2 golden checkpoint in the official layout. */
+    CHECK_OK(g3d_ckpt_open(test_shared("golden/moge2_vits_config/model.pt"), &ck));
+    if (!ck) return;
+    const g3d_tensor_info *t = g3d_ckpt_find(ck, "encoder.backbone.blocks.0.attn.qkv.weight");
+    CHECK(t && t->dtype == G3D_DT_F16 && t->shape[0] == 1152 && t->shape[1] == 384);
+    CHECK(g3d_ckpt_find(ck, "scale_head.0.weight") != NULL);
+    CHECK(cJSON_IsObject(cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "model_config")));
+    printf("  MoGe-2 golden checkpoint: %lld tensors, %lld parameters\n", (long long)g3d_ckpt_count(ck), (long long)g3d_ckpt_numel(ck));
+    g3d_ckpt_free(ck);
+}
+
+TEST(hostile_pickles)
+{
+    g3d_ckpt *ck;
+    CHECK_OK(g3d_ckpt_open(FIXDIR "ok_handmade.pth", &ck));
+    g3d_ckpt_free(ck);
+    const char *bad[] = {"evil.pth", "noncontig.pth", "overrun.pth", "missing_storage.pth", "short_storage.pth",
+                         "truncated.pth", "badop.pth", "underflow.pth", "leftover.pth"};
+    for (size_t k = 0; k < sizeof bad / sizeof *bad; k++) {
+        char path[1024];
+        snprintf(path, sizeof path, FIXDIR "%s", bad[k]);
+        CHECK_FAILS(g3d_ckpt_open(path, &ck));
+    }
+    CHECK_FAILS(g3d_ckpt_open(FIXDIR "evil.pth", &ck));
+    CHECK(strstr(g3d_error_message(), "system") != NULL);
+    /* A zip that is not a checkpoint. */
+    CHECK_FAILS(g3d_ckpt_open(FIXDIR "resize_ref.npz", &ck));
+}
+
+int main(void)
+{
+    RUN(golden_weights);
+    RUN(every_dtype);
+    RUN(hostile_headers);
+    RUN(pytorch_zip);
+    RUN(hostile_pickles);
+    return test_summary();
+}
