@@ -1,6 +1,7 @@
 /* test_train.c - training fits a synthetic Gaussian scene from noisy points, and is
  * deterministic for a fixed seed. */
 #include "gen3d/loss.h"
+#include "gen3d/ply.h"
 #include "gen3d/raster.h"
 #include "gen3d/train.h"
 #include "testutil.h"
@@ -104,6 +105,21 @@ TEST(fits_and_is_deterministic)
     CHECK(g2.n == g.n);
     CHECK(g2.n == g.n && memcmp(g2.means, g.means, (size_t)g.n * 3 * sizeof(float)) == 0 &&
           memcmp(g2.sh, g.sh, (size_t)g.n * 3 * sizeof(float)) == 0);
+
+    /* the trained model survives the standard 3DGS PLY exactly */
+    g3d_gaussians back;
+    const char *ply = test_tmp("trained.ply");
+    CHECK_OK(g3d_ply_write_gaussians(ply, &g));
+    CHECK_OK(g3d_ply_read_gaussians(ply, &back));
+    CHECK(back.n == g.n && back.sh_degree == g.sh_degree);
+    if (back.n == g.n) {
+        CHECK(memcmp(back.means, g.means, (size_t)g.n * 3 * sizeof(float)) == 0);
+        CHECK(memcmp(back.log_scales, g.log_scales, (size_t)g.n * 3 * sizeof(float)) == 0);
+        CHECK(memcmp(back.rots, g.rots, (size_t)g.n * 4 * sizeof(float)) == 0);
+        CHECK(memcmp(back.opacity_logits, g.opacity_logits, (size_t)g.n * sizeof(float)) == 0);
+        CHECK(memcmp(back.sh, g.sh, (size_t)g.n * 3 * sizeof(float)) == 0);
+    }
+    g3d_gaussians_free(&back);
 
     /* a view whose image does not match its camera is refused */
     g3d_image small;
