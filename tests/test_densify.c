@@ -1,66 +1,118 @@
-/* Densification on hand-built Gaussians: clone, split, prune, opacity reset, moments. */
-#include "testutil.h"
+/* test_densify.c - clone / split / prune on hand-built models, moments kept in step. */
 #include "gen3d/densify.h"
+#include "testutil.h"
 
-static void set(g3d_gaussians *g, int64_t i, float x, float log_scale, float opacity)
+static float logit(float p) { return logf(p / (1 - p)); }
+
+/* 4 Gaussians, extent 10 (clone/split boundary 0.1, world-size prune 1.0):
+ *   0 small, high gradient -> cloned      1 large, high gradient -> split
+ *   2 low opacity          -> pruned      3 quiet                -> kept */
+static void build(g3d_gaussians *g, g3d_adam *a, g3d_densify_stats *st)
 {
-    g->means[3 * i] = x;
-    g->means[3 * i + 1] = g->means[3 * i + 2] = 0;
-    for (int k = 0; k < 3; k++) g->log_scales[3 * i + k] = log_scale;
-    g->rots[4 * i] = 1;
-    g->rots[4 * i + 1] = g->rots[4 * i + 2] = g->rots[4 * i + 3] = 0;
-    g->opacity_logits[i] = logf(opacity / (1 - opacity));
-    g->sh[3 * i] = x; /* SH DC tags the Gaussian */
+    g3d_gaussians_create(g, 4, 0);
+    g->n = 4;
+    const float scale[4] = {0.05f, 0.5f, 0.05f, 0.05f}, op[4] = {0.5f, 0.5f, 0.001f, 0.5f};
+    for (int i = 0; i < 4; i++) {
+        for (int k = 0; k < 3; k++) {
+            g->means[i * 3 + k] = (float)(i * 10 + k);
+            g->log_scales[i * 3 + k] = logf(scale[i]);
+            g->sh[i * 3 + k] = 0.1f * (float)i;
+        }
+        g->rots[i * 4] = 1;
+        g->opacity_logits[i] = logit(op[i]);
+    }
+    g->log_scales[1 * 3 + 2] = logf(0.05f); /* Gaussian 1: flat in z */
+    g3d_adam_params p;
+    g3d_adam_params_default(&p);
+    g3d_adam_init(a, &p, g);
+    for (int i = 0; i < 4; i++) a->m.means[i * 3] = a->v.means[i * 3] = 1.0f + (float)i;
+    g3d_densify_stats_init(st, 4);
+    const float grad[4] = {0.001f, 0.001f, 0.00001f, 0.00001f};
+    const int32_t radii[4] = {3, 3, 3, 3};
+    g3d_densify_accumulate(st, grad, radii, 4);
+    g3d_densify_accumulate(st, grad, radii, 4);
 }
 
 TEST(clone_split_prune)
 {
-    /* extent 10: percent_dense 0.01 -> clone when the largest scale <= 0.1. */
     g3d_gaussians g;
-    g3d_gaussians_create(&g, 5, 0);
-    g.n = 5;
-    set(&g, 0, 1, logf(0.05f), 0.5f);  /* high gradient, small: clone */
-    set(&g, 1, 2, logf(0.5f), 0.5f);   /* high gradient, large: split */
-    set(&g, 2, 3, logf(0.05f), 0.001f);/* transparent: pruned */
-    set(&g, 3, 4, logf(0.05f), 0.5f);  /* quiet: kept as it is */
-    set(&g, 4, 5, logf(0.05f), 0.5f);  /* seen huge on screen: pruned when prune_big */
-    g3d_adam opt;
-    CHECK_OK(g3d_adam_init(&opt, &g, 10));
-    for (int i = 0; i < 5; i++) opt.m.opacity_logits[i] = (float)(10 + i);
-    g3d_densify_stats s;
-    CHECK_OK(g3d_densify_stats_init(&s, g.capacity));
-    float grad[5] = {0.001f, 0.001f, 0.0f, 0.00001f, 0.0f}, radius[5] = {3, 3, 3, 3, 50};
-    CHECK_OK(g3d_densify_accumulate(&s, 5, grad, radius));
-    CHECK_OK(g3d_densify_accumulate(&s, 5, grad, radius));
-    g3d_rng rng;
-    g3d_rng_seed(&rng, 1, 0);
-    g3d_densify_report rep;
-    CHECK_OK(g3d_densify(&g, &opt, &s, 10, 1, NULL, &rng, &rep));
-    printf("  cloned %lld, split %lld, pruned %lld -> %lld Gaussians\n", (long long)rep.cloned, (long long)rep.split,
-           (long long)rep.pruned, (long long)g.n);
-    CHECK(rep.cloned == 1 && rep.split == 1 && rep.pruned == 2);
-    CHECK(g.n == 5); /* 5 + 1 clone + 2 halves - 1 split original - 2 pruned */
-    /* Order: survivors of the originals (0, 3), then the clone of 0, then the halves of 1. */
-    CHECK(g.sh[0] == 1 && g.sh[3] == 4 && g.sh[6] == 1 && g.sh[9] == 2 && g.sh[12] == 2);
-    CHECK(opt.m.opacity_logits[0] == 10 && opt.m.opacity_logits[1] == 13); /* moments followed */
-    CHECK(opt.m.opacity_logits[2] == 0 && opt.m.opacity_logits[3] == 0);   /* new ones start at zero */
-    for (int k = 3; k < 5; k++) {
-        CHECK_NEAR(expf(g.log_scales[3 * k]), 0.5 / 1.6, 1e-6);
-        double d = fabs(g.means[3 * k] - 2.0);
-        CHECK(d < 4 * 0.5 && (g.means[3 * k] != 2.0f));
+    g3d_adam a;
+    g3d_densify_stats st;
+    build(&g, &a, &st);
+    g3d_densify_params p;
+    g3d_densify_params_default(&p, 3000);
+    g3d_rng r;
+    g3d_rng_seed(&r, 1, 2);
+    g3d_densify_result res;
+    CHECK_OK(g3d_densify_step(&g, &a, &st, &p, 10.0, 0, &r, &res));
+    CHECK(res.cloned == 1 && res.split == 1 && res.pruned == 1);
+    /* order: 0, 3 (originals kept), clone of 0, 2 children of 1 */
+    CHECK(g.n == 5 && a.m.n == 5 && a.v.n == 5);
+    CHECK_NEAR(g.means[0], 0, 0);
+    CHECK_NEAR(g.means[3], 30, 0);
+    CHECK_NEAR(g.means[6], 0, 0);
+    CHECK_NEAR(a.m.means[0], 1, 0);   /* originals keep their moments */
+    CHECK_NEAR(a.m.means[3], 4, 0);
+    CHECK_NEAR(a.m.means[6], 0, 0);   /* new ones start at zero */
+    CHECK_NEAR(a.v.means[9], 0, 0);
+    for (int c = 3; c < 5; c++) {
+        CHECK_NEAR(expf(g.log_scales[c * 3]), 0.5 / 1.6, 1e-6);
+        CHECK_NEAR(expf(g.log_scales[c * 3 + 2]), 0.05 / 1.6, 1e-7);
+        CHECK_NEAR(g.sh[c * 3], 0.1, 1e-7);
+        /* offsets are samples of the parent Gaussian: within 5 sigma per axis */
+        CHECK(fabs(g.means[c * 3] - 10) < 2.5 && fabs(g.means[c * 3 + 2] - 12) < 0.25);
     }
-    CHECK(s.capacity >= g.n && s.count[0] == 0);
-    /* Opacity reset caps every opacity at 0.01 and forgets the opacity moments. */
-    g3d_opacity_reset(&g, &opt, 0.01f);
-    for (int64_t i = 0; i < g.n; i++) CHECK(1 / (1 + expf(-g.opacity_logits[i])) <= 0.01f + 1e-6f);
-    CHECK(opt.m.opacity_logits[0] == 0);
-    g3d_densify_stats_free(&s);
-    g3d_adam_free(&opt);
+    CHECK(g.means[9] != g.means[12]);
+    CHECK(st.count[0] == 0 && st.capacity >= g.n);
+    g3d_densify_stats_free(&st);
+    g3d_adam_free(&a);
     g3d_gaussians_free(&g);
+}
+
+TEST(prune_large_and_reset)
+{
+    g3d_gaussians g;
+    g3d_adam a;
+    g3d_densify_stats st;
+    build(&g, &a, &st);
+    g3d_densify_params p;
+    g3d_densify_params_default(&p, 3000);
+    p.grad_threshold = 1.0; /* nothing densifies */
+    st.max_radius[3] = 40;  /* too big on screen */
+    g.log_scales[0] = logf(2.0f); /* too big in the world */
+    g3d_rng r;
+    g3d_rng_seed(&r, 1, 2);
+    g3d_densify_result res;
+    CHECK_OK(g3d_densify_step(&g, &a, &st, &p, 10.0, 0, &r, &res));
+    CHECK(g.n == 3 && res.pruned == 1);  /* only the transparent one without size pruning */
+    g3d_densify_accumulate(&st, (const float[]){0, 0, 0}, (const int32_t[]){1, 1, 40}, 3);
+    CHECK_OK(g3d_densify_step(&g, &a, &st, &p, 10.0, 1, &r, &res));
+    CHECK(g.n == 1 && res.pruned == 2 && a.m.n == 1);
+    CHECK_NEAR(g.means[0], 10, 0);
+    g3d_densify_reset_opacity(&g, &a);
+    CHECK_NEAR(1 / (1 + expf(-g.opacity_logits[0])), 0.01, 1e-6);
+    CHECK_NEAR(a.m.opacity_logits[0], 0, 0);
+    /* mismatched moments are refused */
+    a.m.n = 7;
+    CHECK_FAILS(g3d_densify_step(&g, &a, &st, &p, 10.0, 1, &r, &res));
+    g3d_densify_stats_free(&st);
+    g3d_adam_free(&a);
+    g3d_gaussians_free(&g);
+}
+
+TEST(schedule_defaults)
+{
+    g3d_densify_params p;
+    g3d_densify_params_default(&p, 30000);
+    CHECK(p.from == 500 && p.until == 15000 && p.interval == 100 && p.opacity_reset_interval == 3000);
+    g3d_densify_params_default(&p, 3000);
+    CHECK(p.from == 100 && p.until == 1500 && p.opacity_reset_interval == 1000);
 }
 
 int main(void)
 {
     RUN(clone_split_prune);
+    RUN(prune_large_and_reset);
+    RUN(schedule_defaults);
     return test_summary();
 }

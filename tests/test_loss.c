@@ -1,88 +1,129 @@
-/* The masked L1 + D-SSIM loss: agreement with the PyTorch reference (values and autograd
- * gradient) and central finite differences of its own gradient. */
-#include "testutil.h"
-#include "gen3d/depthio.h"
+/* test_loss.c - masked L1+SSIM loss: finite-difference gradient checks, known values. */
 #include "gen3d/loss.h"
+#include "testutil.h"
 
-static const char *FIX = G3D_SOURCE_DIR "/tests/fixtures/ssim_ref.npz";
-
-TEST(matches_pytorch_reference)
+/* pred = target + an offset of at least 0.02 in magnitude, so the finite-difference steps
+ * never cross the kink of |p - t|. */
+static void make_pair(g3d_image *pred, g3d_image *target, g3d_image *mask, int w, int h,
+                      uint64_t seed, float keep)
 {
-    g3d_array img, tgt, mask, terms, grad;
-    CHECK_OK(g3d_npz_load(FIX, "img", &img));
-    CHECK_OK(g3d_npz_load(FIX, "target", &tgt));
-    CHECK_OK(g3d_npz_load(FIX, "mask", &mask));
-    CHECK_OK(g3d_npz_load(FIX, "terms", &terms));
-    CHECK_OK(g3d_npz_load(FIX, "grad", &grad));
-    if (!img.data || !grad.data) return;
-    int h = (int)img.shape[0], w = (int)img.shape[1];
-    float *d = malloc(sizeof(float) * (size_t)w * h * 3);
-    g3d_loss_terms t;
-    CHECK_OK(g3d_loss_l1_dssim(img.data, tgt.data, mask.data, w, h, 0.2, d, &t));
-    printf("  l1 %.7f (ref %.7f), ssim %.7f (ref %.7f), loss %.7f (ref %.7f)\n", t.l1, terms.data[0], t.ssim, terms.data[1],
-           t.loss, terms.data[2]);
-    CHECK_NEAR(t.l1, terms.data[0], 1e-6);
-    CHECK_NEAR(t.ssim, terms.data[1], 1e-6);
-    CHECK_NEAR(t.loss, terms.data[2], 1e-6);
-    double rel = test_rel_l2(d, grad.data, (size_t)w * h * 3);
-    printf("  gradient vs autograd: relative L2 error %.2e\n", rel);
-    CHECK(rel < 1e-5);
-    free(d);
-    g3d_array_free(&img); g3d_array_free(&tgt); g3d_array_free(&mask); g3d_array_free(&terms); g3d_array_free(&grad);
-}
-
-TEST(finite_differences)
-{
-    int w = 13, h = 11;
-    size_t n = (size_t)w * h * 3;
-    float *x = malloc(sizeof(float) * n), *y = malloc(sizeof(float) * n), *m = malloc(sizeof(float) * w * h), *d = malloc(sizeof(float) * n);
     g3d_rng r;
-    g3d_rng_seed(&r, 9, 0);
-    for (size_t i = 0; i < n; i++) { x[i] = g3d_rng_float(&r); y[i] = g3d_rng_float(&r); }
-    for (int i = 0; i < w * h; i++) m[i] = g3d_rng_float(&r) > 0.25f;
-    g3d_loss_terms t, tp, tm;
-    CHECK_OK(g3d_loss_l1_dssim(x, y, m, w, h, 0.2, d, &t));
-    double worst = 0;
-    int checked = 0;
-    for (size_t i = 0; i < n; i += 3) {
-        /* Skip pixels where |x - y| is within the step: L1's kink would spoil the difference. */
-        if (fabsf(x[i] - y[i]) < 2e-3f) continue;
-        float keep = x[i];
-        const float eps = 1e-3f;
-        x[i] = keep + eps;
-        g3d_loss_l1_dssim(x, y, m, w, h, 0.2, NULL, &tp);
-        x[i] = keep - eps;
-        g3d_loss_l1_dssim(x, y, m, w, h, 0.2, NULL, &tm);
-        x[i] = keep;
-        double fd = (tp.loss - tm.loss) / (2.0 * eps), an = d[i];
-        double err = fabs(fd - an) / fmax(fabs(fd), 1e-6);
-        worst = fmax(worst, err);
-        checked++;
+    g3d_rng_seed(&r, seed, 1);
+    g3d_image_create(pred, w, h, 3);
+    g3d_image_create(target, w, h, 3);
+    g3d_image_create(mask, w, h, 1);
+    for (size_t i = 0; i < g3d_image_size(target); i++) {
+        target->data[i] = 0.2f + 0.6f * g3d_rng_float(&r);
+        float off = 0.02f + 0.15f * g3d_rng_float(&r);
+        pred->data[i] = target->data[i] + (g3d_rng_float(&r) < 0.5f ? -off : off);
     }
-    printf("  %d pixels checked: worst relative error %.2e\n", checked, worst);
-    CHECK(checked > 100);
-    CHECK(worst < 1e-3);
-    free(x); free(y); free(m); free(d);
+    for (size_t i = 0; i < g3d_image_size(mask); i++) mask->data[i] = g3d_rng_float(&r) < keep;
+    mask->data[0] = 1;
 }
 
-TEST(properties)
+static void gradcheck(const g3d_image *mask_or_null, g3d_image *pred, const g3d_image *target,
+                      double lambda, double *rel_out)
 {
-    int w = 16, h = 12;
-    size_t n = (size_t)w * h * 3;
-    float *x = malloc(sizeof(float) * n), *m = calloc((size_t)w * h, sizeof(float));
-    for (size_t i = 0; i < n; i++) x[i] = (float)((i * 37) % 101) / 100.0f;
-    g3d_loss_terms t;
-    CHECK_OK(g3d_loss_l1_dssim(x, x, NULL, w, h, 0.2, NULL, &t));
-    CHECK(t.l1 == 0 && fabs(t.ssim - 1.0) < 1e-12 && fabs(t.loss) < 1e-12 && t.valid == w * h);
-    CHECK_FAILS(g3d_loss_l1_dssim(x, x, m, w, h, 0.2, NULL, &t));
-    free(x);
-    free(m);
+    g3d_image grad = {0};
+    g3d_image_create(&grad, pred->w, pred->h, pred->c);
+    double loss;
+    CHECK_OK(g3d_loss_fwd_bwd(pred, target, mask_or_null, lambda, &loss, NULL, &grad));
+    double num = 0, den = 0;
+    for (size_t i = 0; i < g3d_image_size(pred); i++) {
+        float v = pred->data[i];
+        float vp = v + 1e-3f, vm = v - 1e-3f;
+        double lp, lm;
+        pred->data[i] = vp;
+        CHECK_OK(g3d_loss_fwd_bwd(pred, target, mask_or_null, lambda, &lp, NULL, NULL));
+        pred->data[i] = vm;
+        CHECK_OK(g3d_loss_fwd_bwd(pred, target, mask_or_null, lambda, &lm, NULL, NULL));
+        pred->data[i] = v;
+        double fd = (lp - lm) / ((double)vp - (double)vm);
+        double d = grad.data[i] - fd;
+        num += d * d;
+        den += fd * fd;
+    }
+    *rel_out = sqrt(num / den);
+    g3d_image_free(&grad);
+}
+
+TEST(gradient_masked)
+{
+    g3d_image p = {0}, t = {0}, m = {0};
+    make_pair(&p, &t, &m, 13, 11, 7, 0.6f);
+    double rel;
+    gradcheck(&m, &p, &t, 0.2, &rel);
+    printf("       masked L1+SSIM (lambda 0.2) gradient rel. error %.2e\n", rel);
+    CHECK(rel <= 1e-3);
+    gradcheck(&m, &p, &t, 1.0, &rel);
+    printf("       masked pure SSIM gradient rel. error %.2e\n", rel);
+    CHECK(rel <= 1e-3);
+    g3d_image_free(&p); g3d_image_free(&t); g3d_image_free(&m);
+}
+
+TEST(gradient_unmasked)
+{
+    g3d_image p = {0}, t = {0}, m = {0};
+    make_pair(&p, &t, &m, 16, 9, 11, 1.0f);
+    double rel;
+    gradcheck(NULL, &p, &t, 0.2, &rel);
+    printf("       unmasked gradient rel. error %.2e\n", rel);
+    CHECK(rel <= 1e-3);
+    g3d_image_free(&p); g3d_image_free(&t); g3d_image_free(&m);
+}
+
+TEST(known_values)
+{
+    g3d_image p = {0}, t = {0}, m = {0};
+    make_pair(&p, &t, &m, 12, 12, 3, 0.5f);
+    double loss, ssim, psnr;
+    /* identical images: SSIM 1, loss 0, infinite PSNR */
+    CHECK_OK(g3d_loss_fwd_bwd(&t, &t, &m, 0.2, &loss, &ssim, NULL));
+    CHECK_NEAR(ssim, 1.0, 1e-12);
+    CHECK_NEAR(loss, 0.0, 1e-12);
+    CHECK_OK(g3d_psnr(&t, &t, NULL, &psnr));
+    CHECK(isinf(psnr));
+    /* lambda 0: loss is the masked mean absolute error */
+    double sum = 0; int64_t n = 0;
+    for (int i = 0; i < 144; i++)
+        if (m.data[i] > 0.5f)
+            for (int ch = 0; ch < 3; ch++) { sum += fabs((double)p.data[i*3+ch] - t.data[i*3+ch]); n++; }
+    CHECK_OK(g3d_loss_fwd_bwd(&p, &t, &m, 0.0, &loss, NULL, NULL));
+    CHECK_NEAR(loss, sum / n, 1e-12);
+    /* an all-ones mask equals no mask */
+    double l2;
+    for (int i = 0; i < 144; i++) m.data[i] = 1;
+    CHECK_OK(g3d_loss_fwd_bwd(&p, &t, &m, 0.2, &loss, NULL, NULL));
+    CHECK_OK(g3d_loss_fwd_bwd(&p, &t, NULL, 0.2, &l2, NULL, NULL));
+    CHECK_NEAR(loss, l2, 1e-15);
+    /* a uniform error of 0.1 is 20 dB; masked-out pixels do not count */
+    for (size_t i = 0; i < g3d_image_size(&p); i++) p.data[i] = t.data[i] + 0.1f;
+    for (int i = 0; i < 144; i++) m.data[i] = i % 2;
+    p.data[0] = 5; /* pixel 0 is masked out */
+    CHECK_OK(g3d_psnr(&p, &t, &m, &psnr));
+    CHECK_NEAR(psnr, 20.0, 1e-4);
+    g3d_image_free(&p); g3d_image_free(&t); g3d_image_free(&m);
+}
+
+TEST(errors)
+{
+    g3d_image p = {0}, t = {0}, m = {0}, small = {0};
+    make_pair(&p, &t, &m, 8, 8, 5, 1.0f);
+    g3d_image_create(&small, 7, 8, 3);
+    double loss, psnr;
+    CHECK_FAILS(g3d_loss_fwd_bwd(&p, &small, NULL, 0.2, &loss, NULL, NULL));
+    for (int i = 0; i < 64; i++) m.data[i] = 0;
+    CHECK_FAILS(g3d_loss_fwd_bwd(&p, &t, &m, 0.2, &loss, NULL, NULL));
+    CHECK_FAILS(g3d_psnr(&p, &t, &m, &psnr));
+    CHECK_FAILS(g3d_loss_fwd_bwd(&p, &t, NULL, 1.5, &loss, NULL, NULL));
+    g3d_image_free(&p); g3d_image_free(&t); g3d_image_free(&m); g3d_image_free(&small);
 }
 
 int main(void)
 {
-    RUN(matches_pytorch_reference);
-    RUN(finite_differences);
-    RUN(properties);
+    RUN(gradient_masked);
+    RUN(gradient_unmasked);
+    RUN(known_values);
+    RUN(errors);
     return test_summary();
 }

@@ -1,10 +1,17 @@
-/* gen3d/adam.h - Adam for the Gaussian model, with one learning rate per parameter group.
+/* gen3d/adam.h - Adam optimiser over the Gaussian model, with per-group learning rates.
  *
- * The optimiser state mirrors g3d_gaussians: first and second moments for every parameter,
- * in arrays of the same shapes, so that densification can copy, append and drop Gaussians in
- * the state exactly as in the model (new Gaussians start with zero moments, as in the
- * reference implementation). Update, per element: m = b1 m + (1-b1) g, v = b2 v + (1-b2) g^2,
- * p -= lr * (m / (1 - b1^t)) / (sqrt(v / (1 - b2^t)) + eps), with eps = 1e-15 as in 3DGS.
+ * Gradients and both moment estimates are stored as g3d_gaussians structs (gaussians.h), so
+ * they share the model's SoA layout: grad->means[i*3+k] is dL/d g->means[i*3+k], and the
+ * moments follow densification through the same g3d_gaussians_* calls (reserve, copy_one,
+ * compact) that edit the model. One global step count drives bias correction, as in the
+ * reference implementation (moments of newly created Gaussians start at zero).
+ *
+ * Learning rates (3DGS defaults, g3d_adam_params_default):
+ *   means    1.6e-4 * extent, decaying log-linearly to 1.6e-6 * extent over `means_lr_steps`
+ *   SH DC    2.5e-3, SH rest 2.5e-3 / 20
+ *   opacity  2.5e-2 (the Oct-2024 reference value; the 2023 release used 5e-2 - the lower
+ *            value is gentler on short schedules that reset opacity)
+ *   scales   5e-3,  rotations 1e-3;  beta = (0.9, 0.999), eps = 1e-15.
  */
 #ifndef G3D_ADAM_H
 #define G3D_ADAM_H
@@ -16,34 +23,47 @@ extern "C" {
 #endif
 
 typedef enum g3d_param_group {
-    G3D_GROUP_MEANS, G3D_GROUP_SCALES, G3D_GROUP_ROTS, G3D_GROUP_OPACITY, G3D_GROUP_SH_DC, G3D_GROUP_SH_REST,
-    G3D_GROUP_COUNT
+    G3D_PG_MEANS = 0,
+    G3D_PG_SH_DC,
+    G3D_PG_SH_REST,
+    G3D_PG_OPACITY,
+    G3D_PG_SCALES,
+    G3D_PG_ROTS,
+    G3D_PG_COUNT
 } g3d_param_group;
 
-typedef struct g3d_adam {
-    double lr[G3D_GROUP_COUNT];  /* learning rate per group */
+typedef struct g3d_adam_params {
+    double lr[G3D_PG_COUNT];  /* lr[G3D_PG_MEANS] is the initial rate per unit of extent */
+    double means_lr_final;    /* final means rate per unit of extent */
+    int64_t means_lr_steps;   /* steps over which the means rate decays (then stays final) */
     double beta1, beta2, eps;
-    int64_t step;                /* updates done (for bias correction) */
-    g3d_gaussians m, v;          /* moments, same layout and capacity as the model */
+} g3d_adam_params;
+
+typedef struct g3d_adam {
+    g3d_adam_params p;
+    int64_t step;       /* steps taken so far */
+    g3d_gaussians m, v; /* first and second moments, same degree and capacity as the model */
 } g3d_adam;
 
-/* Zeroed moments sized like g, the reference 3DGS learning rates (means 1.6e-4 x
- * scene_extent, scales 5e-3, rotations 1e-3, opacity 2.5e-2, SH DC 2.5e-3, SH rest 2.5e-3/20),
- * betas (0.9, 0.999), eps 1e-15. */
-g3d_status g3d_adam_init(g3d_adam *a, const g3d_gaussians *g, double scene_extent);
+/* Fills the 3DGS defaults above; means_lr_steps = 30000 (set it to the schedule length). */
+void g3d_adam_params_default(g3d_adam_params *p);
+
+/* Creates zero moments shaped like `model` (its capacity, n and sh_degree). a is overwritten. */
+g3d_status g3d_adam_init(g3d_adam *a, const g3d_adam_params *p, const g3d_gaussians *model);
+/* Frees the moments; NULL or zeroed is fine. */
 void g3d_adam_free(g3d_adam *a);
 
-/* One step: params -= update(grads). grads has the model's layout (a g3d_gaussians holding
- * gradients). Moments grow with the model if it grew (new Gaussians get zero moments). */
-g3d_status g3d_adam_step(g3d_adam *a, g3d_gaussians *params, const g3d_gaussians *grads);
+/* The means learning rate (world units) at `step` for a scene of size `extent`. */
+double g3d_adam_means_lr(const g3d_adam_params *p, int64_t step, double extent);
 
-/* Extends the moments with zeros up to the model's current count (after Gaussians were
- * appended to it). */
-g3d_status g3d_adam_grow(g3d_adam *a, const g3d_gaussians *params);
-
-/* Keeps the moments of the Gaussians with keep[i] != 0 (call with the same mask as
- * g3d_gaussians_compact on the model). */
-void g3d_adam_compact(g3d_adam *a, const uint8_t *keep);
+/* One Adam step on the first model->n Gaussians: increments a->step, then for every value
+ *   m = b1 m + (1-b1) g;  v = b2 v + (1-b2) g^2;
+ *   x -= lr * (m / (1 - b1^t)) / (sqrt(v / (1 - b2^t)) + eps)
+ * with lr from the value's group (means scheduled by g3d_adam_means_lr at the step before
+ * the increment). grad must have the model's sh_degree and n; the moments must have the
+ * model's n (keep them in sync when densifying). G3D_ERR_MISMATCH otherwise. */
+g3d_status g3d_adam_step(g3d_adam *a, g3d_gaussians *model, const g3d_gaussians *grad,
+                         double extent);
 
 #ifdef __cplusplus
 }

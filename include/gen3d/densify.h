@@ -1,18 +1,18 @@
-/* gen3d/densify.h - adaptive density control of the Gaussian model (the reference 3DGS
- * rules), keeping the optimiser state in step with the model.
+/* gen3d/densify.h - adaptive density control of 3D Gaussian splatting (Kerbl et al. 2023).
  *
- *   - statistics: the view-space positional gradient norm of each Gaussian, accumulated over
- *     the views in which it was visible (g3d_densify_accumulate);
- *   - clone: mean gradient >= grad_threshold and largest scale <= percent_dense * extent:
- *     an identical copy is added (both then move apart under the optimiser);
- *   - split: mean gradient >= grad_threshold and largest scale > percent_dense * extent:
- *     replaced by `split_n` Gaussians drawn from it (means sampled from the Gaussian itself,
- *     scales divided by 0.8 * split_n);
- *   - prune: opacity below min_opacity, and when `prune_big` is set also Gaussians whose
- *     largest screen radius exceeded max_screen_px or whose largest scale exceeds
- *     max_world_fraction * extent;
- *   - opacity reset: every opacity clamped to at most `value`.
- * New Gaussians get zero optimiser moments; removed ones take theirs with them.
+ * Every view the trainer adds, for each Gaussian visible in it (screen radius > 0), the norm of
+ * the loss gradient w.r.t. its projected 2D mean (NDC units, raster.h grad2d) and one count.
+ * Every `interval` iterations in [from, until):
+ *   clone  avg grad >= grad_threshold and max scale <= percent_dense * extent: an exact copy
+ *          is appended (Adam moments of the copy zero);
+ *   split  avg grad >= grad_threshold and max scale > percent_dense * extent (originals only):
+ *          2 children at mean + R (s * eps), eps ~ N(0, I), scale / 1.6, other parameters
+ *          copied, zero moments; the parent is removed;
+ *   prune  opacity < min_opacity; and, once past the first opacity reset, screen radius
+ *          > max_screen_radius px or max scale > max_world_scale * extent.
+ * Then the statistics restart. Every `opacity_reset_interval` iterations (while densifying),
+ * opacities are clamped to at most 0.01 and their Adam moments zeroed.
+ * Moments are kept in step with the model: every edit applies to adam->m and adam->v too.
  */
 #ifndef G3D_DENSIFY_H
 #define G3D_DENSIFY_H
@@ -24,38 +24,52 @@ extern "C" {
 #endif
 
 typedef struct g3d_densify_params {
-    float grad_threshold;      /* 0.0002 */
-    float percent_dense;       /* 0.01 */
-    float min_opacity;         /* 0.005 */
-    float max_screen_px;       /* 20 */
-    float max_world_fraction;  /* 0.1 */
-    int split_n;               /* 2 */
+    int64_t from, until, interval;  /* iterations: densify when from < it < until, it % interval == 0 */
+    int64_t opacity_reset_interval; /* 0 = never */
+    double grad_threshold;          /* 0.0002 */
+    double percent_dense;           /* 0.01 (of extent): clone/split boundary */
+    double min_opacity;             /* 0.005 */
+    double max_screen_radius;       /* 20 px */
+    double max_world_scale;         /* 0.1 (of extent) */
+    int64_t max_gaussians;          /* growth stops here (clones/splits skipped); 0 = no cap */
 } g3d_densify_params;
-g3d_densify_params g3d_densify_params_default(void);
 
-/* Per-Gaussian statistics between two densification steps. */
+/* Defaults for a schedule of `iterations` steps. At the reference 30000 the Inria values
+ * (from 500, until 15000, every 100, opacity reset every 3000); shorter schedules keep the
+ * interval of 100 (the statistic needs that many views) and scale the rest:
+ * from = max(100, it/60), until = it/2, reset = max(1000, it/10). */
+void g3d_densify_params_default(g3d_densify_params *p, int64_t iterations);
+
+/* Per-Gaussian statistics, sized to the model's capacity. */
 typedef struct g3d_densify_stats {
+    float *grad_accum;   /* (capacity) sum of 2D gradient norms */
+    int32_t *count;      /* (capacity) views that saw the Gaussian */
+    float *max_radius;   /* (capacity) largest screen radius seen, px */
     int64_t capacity;
-    double *grad_sum;     /* (capacity) accumulated view-space gradient norms */
-    int32_t *count;       /* (capacity) views in which the Gaussian was visible */
-    float *max_radius;    /* (capacity) largest screen radius seen, pixels */
 } g3d_densify_stats;
-g3d_status g3d_densify_stats_init(g3d_densify_stats *s, int64_t n);
-void g3d_densify_stats_free(g3d_densify_stats *s);
 
-/* Adds one view: grad_norm (n) and radius (n, 0 = not visible). */
-g3d_status g3d_densify_accumulate(g3d_densify_stats *s, int64_t n, const float *grad_norm, const float *radius);
+/* Allocates zero statistics for `capacity` Gaussians (st is overwritten). */
+g3d_status g3d_densify_stats_init(g3d_densify_stats *st, int64_t capacity);
+void g3d_densify_stats_free(g3d_densify_stats *st);  /* NULL/zeroed fine */
 
-typedef struct g3d_densify_report { int64_t cloned, split, pruned; } g3d_densify_report;
+/* Adds one view: grad2d (n) and radii (n) as produced by g3d_raster_fwd/bwd for that view. */
+void g3d_densify_accumulate(g3d_densify_stats *st, const float *grad2d, const int32_t *radii,
+                            int64_t n);
 
-/* Clones, splits and prunes g (and the moments in opt, which may be NULL), then resets the
- * statistics for the new count. rng draws the split samples. */
-g3d_status g3d_densify(g3d_gaussians *g, g3d_adam *opt, g3d_densify_stats *s, double extent, int prune_big,
-                       const g3d_densify_params *p, g3d_rng *rng, g3d_densify_report *report);
+typedef struct g3d_densify_result {
+    int64_t cloned, split, pruned;
+} g3d_densify_result;
 
-/* Clamps every opacity to at most `value` (0.01 in the reference) and zeroes the opacity
- * moments of opt (may be NULL). */
-void g3d_opacity_reset(g3d_gaussians *g, g3d_adam *opt, float value);
+/* Clone, split, prune as described above, on g and the moments in adam, then zero the
+ * statistics (reallocated to the model's new capacity). prune_large: apply the screen/world
+ * size tests. rng draws the split offsets. res may be NULL. On failure (NOMEM) the model
+ * may have grown but stays consistent with the moments. */
+g3d_status g3d_densify_step(g3d_gaussians *g, g3d_adam *adam, g3d_densify_stats *st,
+                            const g3d_densify_params *p, double extent, int prune_large,
+                            g3d_rng *rng, g3d_densify_result *res);
+
+/* opacity := min(opacity, 0.01); the opacity moments are zeroed. */
+void g3d_densify_reset_opacity(g3d_gaussians *g, g3d_adam *adam);
 
 #ifdef __cplusplus
 }

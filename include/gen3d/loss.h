@@ -1,39 +1,47 @@
-/* gen3d/loss.h - the photometric loss of 3D Gaussian splatting, restricted to valid pixels.
+/* gen3d/loss.h - the photometric training loss of 3D Gaussian splatting, and PSNR.
  *
- *   L = (1 - lambda) * L1 + lambda * (1 - SSIM),   lambda = 0.2 in the reference training
+ *   L = (1 - lambda) * L1 + lambda * (1 - SSIM)
  *
- * SSIM follows the reference implementation: per channel, local means, variances and
- * covariance from an 11 x 11 Gaussian window (sigma 1.5) with zero padding ("same" size),
- * C1 = 0.01^2, C2 = 0.03^2, and the SSIM map averaged. Both terms here average only over the
- * pixels where mask > 0.5 (the paper trains the extra reprojected views on their valid
- * pixels only); mask NULL means every pixel. The window itself still sees the neighbours'
- * values, as in the reference.
+ * L1 and SSIM are both means over the VALID pixels only (mask value > 0.5) and all channels,
+ * so views reprojected from another camera train only where they carry information.
+ * SSIM follows the reference 3DGS implementation: per channel, 11x11 Gaussian window with
+ * sigma 1.5, C1 = 0.01^2, C2 = 0.03^2, the local statistics computed over the whole image
+ * with zero padding outside it ('same' convolution); only the averaging of the SSIM map is
+ * masked. All arithmetic is in double precision with fixed-order loops (deterministic).
  *
- * Images are (h, w, 3) float, channels interleaved. Computed in double precision.
+ * Images: g3d_image (image.h), same w/h/c for pred and target; mask c = 1, same w/h, or NULL
+ * for "all pixels valid".
  */
 #ifndef G3D_LOSS_H
 #define G3D_LOSS_H
 
-#include "gen3d/base.h"
+#include "gen3d/image.h"
 
 #ifdef __cplusplus
 extern "C" {
 #endif
 
-#define G3D_SSIM_WINDOW 11
-#define G3D_SSIM_SIGMA 1.5
+#define G3D_LOSS_LAMBDA_SSIM 0.2
 
-typedef struct g3d_loss_terms {
-    double l1;       /* masked mean absolute error */
-    double ssim;     /* masked mean SSIM */
-    double loss;     /* (1 - lambda) l1 + lambda (1 - ssim) */
-    int64_t valid;   /* pixels that counted */
-} g3d_loss_terms;
+/* Loss value and, optionally, its gradient with respect to every value of `pred`.
+ *   pred, target: (h, w, c) images;  mask: (h, w, 1) or NULL.
+ *   lambda:  SSIM weight in [0, 1] (G3D_LOSS_LAMBDA_SSIM is the 3DGS default).
+ *   loss:    out, the scalar loss.
+ *   ssim:    out (may be NULL), the masked mean SSIM.
+ *   grad:    NULL, or a caller-owned image of pred's shape that receives dL/dpred
+ *            (overwritten, not accumulated).
+ * Fails with G3D_ERR_MISMATCH on shape disagreement, G3D_ERR_ARG when no pixel is valid or
+ * lambda is out of range; outputs are untouched on failure. Thread-safe (allocates its own
+ * scratch). */
+g3d_status g3d_loss_fwd_bwd(const g3d_image *pred, const g3d_image *target,
+                            const g3d_image *mask, double lambda, double *loss, double *ssim,
+                            g3d_image *grad);
 
-/* Loss of `img` against `target`. If dimg is not NULL it receives dL/dimg (h, w, 3),
- * overwritten. Fails (G3D_ERR_ARG) when no pixel is valid. */
-g3d_status g3d_loss_l1_dssim(const float *img, const float *target, const float *mask, int w, int h, double lambda,
-                             float *dimg, g3d_loss_terms *out);
+/* Peak signal-to-noise ratio in dB for values in [0, 1], over the valid pixels (mask > 0.5,
+ * or all when mask is NULL) and all channels: 10 log10(1 / MSE). An exact match gives
+ * +infinity. Same failure cases as g3d_loss_fwd_bwd. */
+g3d_status g3d_psnr(const g3d_image *pred, const g3d_image *target, const g3d_image *mask,
+                    double *psnr);
 
 #ifdef __cplusplus
 }

@@ -1,101 +1,168 @@
-/* Masked L1 + D-SSIM loss and its gradient with respect to the rendered image. */
+/* loss.c - masked L1 + SSIM loss with its analytic gradient, and masked PSNR. */
 #include "gen3d/loss.h"
 
 #include <math.h>
 #include <stdlib.h>
-#include <string.h>
 
-#define R (G3D_SSIM_WINDOW / 2)
+#define WIN 11
+#define HALF 5
+#define SSIM_C1 (0.01 * 0.01)
+#define SSIM_C2 (0.03 * 0.03)
 
-static void gaussian_taps(double g[G3D_SSIM_WINDOW])
+static void gauss_window(double k[WIN])
 {
     double s = 0;
-    for (int i = 0; i < G3D_SSIM_WINDOW; i++) {
-        double d = i - R;
-        g[i] = exp(-d * d / (2 * G3D_SSIM_SIGMA * G3D_SSIM_SIGMA));
-        s += g[i];
+    for (int i = 0; i < WIN; i++) {
+        double d = i - HALF;
+        k[i] = exp(-d * d / (2.0 * 1.5 * 1.5));
+        s += k[i];
     }
-    for (int i = 0; i < G3D_SSIM_WINDOW; i++) g[i] /= s;
+    for (int i = 0; i < WIN; i++) k[i] /= s;
 }
 
-/* out = G * in for one (h, w) plane, zero outside the image. The window is symmetric, so the
- * same filter is also its own transpose (used by the backward pass). tmp: (h, w). */
-static void blur(const double *in, double *out, double *tmp, int w, int h, const double g[G3D_SSIM_WINDOW])
+/* Separable 'same' filtering with zero padding; the kernel is symmetric, so this operator is
+ * self-adjoint and serves the backward pass unchanged. tmp: w*h scratch. */
+static void blur(const double *in, double *out, double *tmp, int w, int h, const double k[WIN])
 {
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
             double s = 0;
-            for (int k = -R; k <= R; k++) {
-                int xx = x + k;
-                if (xx >= 0 && xx < w) s += g[k + R] * in[(size_t)y * w + xx];
+            for (int i = -HALF; i <= HALF; i++) {
+                int xx = x + i;
+                if (xx >= 0 && xx < w) s += k[i + HALF] * in[(size_t)y * w + xx];
             }
             tmp[(size_t)y * w + x] = s;
         }
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
             double s = 0;
-            for (int k = -R; k <= R; k++) {
-                int yy = y + k;
-                if (yy >= 0 && yy < h) s += g[k + R] * tmp[(size_t)yy * w + x];
+            for (int i = -HALF; i <= HALF; i++) {
+                int yy = y + i;
+                if (yy >= 0 && yy < h) s += k[i + HALF] * tmp[(size_t)yy * w + x];
             }
             out[(size_t)y * w + x] = s;
         }
 }
 
-g3d_status g3d_loss_l1_dssim(const float *img, const float *target, const float *mask, int w, int h, double lambda,
-                             float *dimg, g3d_loss_terms *out)
+static g3d_status check_inputs(const g3d_image *pred, const g3d_image *target,
+                               const g3d_image *mask, int64_t *nvalid)
 {
-    const double C1 = 0.01 * 0.01, C2 = 0.03 * 0.03;
-    size_t n = (size_t)w * h;
-    int64_t valid = 0;
-    for (size_t i = 0; i < n; i++) valid += !mask || mask[i] > 0.5f;
-    if (valid == 0) return G3D_ERR(G3D_ERR_ARG, "loss: no valid pixel");
-    double *buf = malloc(sizeof(double) * n * 12);
-    if (!buf) return G3D_ERR(G3D_ERR_NOMEM, "loss: out of memory");
-    double *x = buf, *y = buf + n, *mx = buf + 2 * n, *my = buf + 3 * n, *exx = buf + 4 * n, *eyy = buf + 5 * n,
-           *exy = buf + 6 * n, *tmp = buf + 7 * n, *gmu = buf + 8 * n, *gxx = buf + 9 * n, *gxy = buf + 10 * n,
-           *sq = buf + 11 * n;
-    double g[G3D_SSIM_WINDOW];
-    gaussian_taps(g);
-    double norm = 1.0 / ((double)valid * 3.0), l1 = 0, ssim = 0;
-    if (dimg) memset(dimg, 0, sizeof(float) * n * 3);
-    for (int c = 0; c < 3; c++) {
-        for (size_t i = 0; i < n; i++) { x[i] = img[3 * i + c]; y[i] = target[3 * i + c]; }
-        blur(x, mx, tmp, w, h, g);
-        blur(y, my, tmp, w, h, g);
-        for (size_t i = 0; i < n; i++) sq[i] = x[i] * x[i];
-        blur(sq, exx, tmp, w, h, g);
-        for (size_t i = 0; i < n; i++) sq[i] = y[i] * y[i];
-        blur(sq, eyy, tmp, w, h, g);
-        for (size_t i = 0; i < n; i++) sq[i] = x[i] * y[i];
-        blur(sq, exy, tmp, w, h, g);
-        for (size_t i = 0; i < n; i++) {
-            double wgt = (!mask || mask[i] > 0.5f) ? norm : 0.0;
-            double d = x[i] - y[i];
-            l1 += wgt * fabs(d);
-            double sx = exx[i] - mx[i] * mx[i], sy = eyy[i] - my[i] * my[i], sxy = exy[i] - mx[i] * my[i];
-            double A1 = 2 * mx[i] * my[i] + C1, A2 = 2 * sxy + C2, B1 = mx[i] * mx[i] + my[i] * my[i] + C1, B2 = sx + sy + C2;
-            double S = A1 * A2 / (B1 * B2);
-            ssim += wgt * S;
-            /* dS with respect to the local moments mu_x, E[x^2], E[xy] (see the header). */
-            gmu[i] = wgt * (2 * my[i] * (A2 - A1) / (B1 * B2) - 2 * mx[i] * S * (1 / B1 - 1 / B2));
-            gxx[i] = wgt * (-S / B2);
-            gxy[i] = wgt * (2 * A1 / (B1 * B2));
-            if (dimg) dimg[3 * i + c] = (float)((1 - lambda) * wgt * (d > 0 ? 1.0 : d < 0 ? -1.0 : 0.0));
+    if (!pred || !target || !pred->data || !target->data)
+        return G3D_ERR(G3D_ERR_ARG, "loss: empty image");
+    if (pred->w != target->w || pred->h != target->h || pred->c != target->c)
+        return G3D_ERR(G3D_ERR_MISMATCH, "loss: prediction %dx%dx%d vs target %dx%dx%d",
+                       pred->w, pred->h, pred->c, target->w, target->h, target->c);
+    size_t np = (size_t)pred->w * pred->h;
+    if (mask) {
+        if (mask->w != pred->w || mask->h != pred->h || mask->c != 1)
+            return G3D_ERR(G3D_ERR_MISMATCH, "loss: mask %dx%dx%d vs image %dx%d (1 channel expected)",
+                           mask->w, mask->h, mask->c, pred->w, pred->h);
+        int64_t n = 0;
+        for (size_t i = 0; i < np; i++) n += mask->data[i] > 0.5f;
+        *nvalid = n;
+    } else {
+        *nvalid = (int64_t)np;
+    }
+    if (*nvalid == 0) return G3D_ERR(G3D_ERR_ARG, "loss: the mask has no valid pixel");
+    return G3D_OK;
+}
+
+static int valid(const g3d_image *mask, size_t i) { return !mask || mask->data[i] > 0.5f; }
+
+g3d_status g3d_loss_fwd_bwd(const g3d_image *pred, const g3d_image *target,
+                            const g3d_image *mask, double lambda, double *loss, double *ssim,
+                            g3d_image *grad)
+{
+    int64_t nvalid;
+    G3D_TRY(check_inputs(pred, target, mask, &nvalid));
+    if (!(lambda >= 0 && lambda <= 1))
+        return G3D_ERR(G3D_ERR_ARG, "loss: SSIM weight %g outside [0, 1]", lambda);
+    if (grad && (grad->w != pred->w || grad->h != pred->h || grad->c != pred->c || !grad->data))
+        return G3D_ERR(G3D_ERR_MISMATCH, "loss: gradient image does not match the prediction");
+
+    const int w = pred->w, h = pred->h, c = pred->c;
+    const size_t np = (size_t)w * h;
+    /* planes: p, t, mu1, mu2, e11, e22, e12, tmp, and 3 backward weights */
+    double *buf = g3d_calloc(np, 11 * sizeof(double), "loss scratch");
+    if (!buf) return G3D_ERR_NOMEM;
+    double *p = buf, *t = p + np, *mu1 = t + np, *mu2 = mu1 + np, *e11 = mu2 + np,
+           *e22 = e11 + np, *e12 = e22 + np, *tmp = e12 + np, *wa = tmp + np, *wb = wa + np,
+           *wc = wb + np;
+    double k[WIN];
+    gauss_window(k);
+    const double count = (double)nvalid * c;
+    double l1 = 0, ssim_sum = 0;
+
+    for (int ch = 0; ch < c; ch++) {
+        for (size_t i = 0; i < np; i++) {
+            p[i] = pred->data[i * c + ch];
+            t[i] = target->data[i * c + ch];
+            if (valid(mask, i)) l1 += fabs(p[i] - t[i]);
         }
-        if (dimg) {
-            /* Back through the window: d(mean S)/dx(q) = G^T gmu + 2 x G^T gxx + y G^T gxy. */
-            blur(gmu, mx, tmp, w, h, g);
-            blur(gxx, exx, tmp, w, h, g);
-            blur(gxy, exy, tmp, w, h, g);
-            for (size_t i = 0; i < n; i++)
-                dimg[3 * i + c] += (float)(-lambda * (mx[i] + 2 * x[i] * exx[i] + y[i] * exy[i]));
+        blur(p, mu1, tmp, w, h, k);
+        blur(t, mu2, tmp, w, h, k);
+        for (size_t i = 0; i < np; i++) wa[i] = p[i] * p[i];
+        blur(wa, e11, tmp, w, h, k);
+        for (size_t i = 0; i < np; i++) wa[i] = t[i] * t[i];
+        blur(wa, e22, tmp, w, h, k);
+        for (size_t i = 0; i < np; i++) wa[i] = p[i] * t[i];
+        blur(wa, e12, tmp, w, h, k);
+
+        for (size_t i = 0; i < np; i++) {
+            double m1 = mu1[i], m2 = mu2[i];
+            double s11 = e11[i] - m1 * m1, s22 = e22[i] - m2 * m2, s12 = e12[i] - m1 * m2;
+            double A = 2 * m1 * m2 + SSIM_C1, B = 2 * s12 + SSIM_C2;
+            double C = m1 * m1 + m2 * m2 + SSIM_C1, D = s11 + s22 + SSIM_C2;
+            double s = A * B / (C * D);
+            if (valid(mask, i)) {
+                ssim_sum += s;
+                /* dL/dssim = -lambda / count; chain through mu1, E[p^2], E[pt] */
+                double ws = -lambda / count;
+                double dmu1 = (2 * m2 * B - 2 * m2 * A) / (C * D) - s * 2 * m1 / C + s * 2 * m1 / D;
+                wa[i] = ws * dmu1;
+                wb[i] = ws * (-s / D);
+                wc[i] = ws * (2 * A / (C * D));
+            } else {
+                wa[i] = wb[i] = wc[i] = 0;
+            }
+        }
+        if (grad) {
+            blur(wa, mu1, tmp, w, h, k); /* mu1/e11/e12 are no longer needed */
+            blur(wb, e11, tmp, w, h, k);
+            blur(wc, e12, tmp, w, h, k);
+            for (size_t i = 0; i < np; i++) {
+                double g = mu1[i] + 2 * p[i] * e11[i] + t[i] * e12[i];
+                if (valid(mask, i)) {
+                    double d = p[i] - t[i];
+                    g += (1 - lambda) * (d > 0 ? 1.0 : d < 0 ? -1.0 : 0.0) / count;
+                }
+                grad->data[i * c + ch] = (float)g;
+            }
         }
     }
+    double mean_ssim = ssim_sum / count;
+    *loss = (1 - lambda) * (l1 / count) + lambda * (1 - mean_ssim);
+    if (ssim) *ssim = mean_ssim;
     free(buf);
-    out->l1 = l1;
-    out->ssim = ssim;
-    out->loss = (1 - lambda) * l1 + lambda * (1 - ssim);
-    out->valid = valid;
+    return G3D_OK;
+}
+
+g3d_status g3d_psnr(const g3d_image *pred, const g3d_image *target, const g3d_image *mask,
+                    double *psnr)
+{
+    int64_t nvalid;
+    G3D_TRY(check_inputs(pred, target, mask, &nvalid));
+    const int c = pred->c;
+    const size_t np = (size_t)pred->w * pred->h;
+    double se = 0;
+    for (size_t i = 0; i < np; i++) {
+        if (!valid(mask, i)) continue;
+        for (int ch = 0; ch < c; ch++) {
+            double d = (double)pred->data[i * c + ch] - target->data[i * c + ch];
+            se += d * d;
+        }
+    }
+    double mse = se / ((double)nvalid * c);
+    *psnr = mse > 0 ? 10.0 * log10(1.0 / mse) : INFINITY;
     return G3D_OK;
 }
