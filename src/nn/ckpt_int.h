@@ -29,3 +29,36 @@ g3d_status g3d__safetensors_parse(g3d_ckpt *ck);
 g3d_status g3d__torch_zip_parse(g3d_ckpt *ck);
 
 #endif
+
+/* ---- restricted unpickler (pickle.c) -------------------------------------------------- */
+typedef enum g3d__pk_kind {
+    G3D_PK_NONE, G3D_PK_BOOL, G3D_PK_INT, G3D_PK_FLOAT, G3D_PK_STR, G3D_PK_LIST, G3D_PK_TUPLE,
+    G3D_PK_DICT, G3D_PK_GLOBAL, G3D_PK_STORAGE, G3D_PK_TENSOR
+} g3d__pk_kind;
+
+typedef struct g3d__pv g3d__pv;
+struct g3d__pv {
+    g3d__pk_kind kind;
+    int64_t i;                 /* INT, BOOL; STORAGE: numel; TENSOR: storage offset (elements) */
+    double f;                  /* FLOAT */
+    char *s;                   /* STR; GLOBAL "module.name"; STORAGE: key */
+    g3d__pv **items;           /* LIST/TUPLE elements; DICT alternating key, value (n counts both) */
+    int64_t n, cap;
+    int dtype;                 /* STORAGE, TENSOR: g3d_dtype */
+    g3d__pv *storage;          /* TENSOR */
+    int ndim;                  /* TENSOR */
+    int64_t shape[G3D_MAX_DIMS], stride[G3D_MAX_DIMS];
+};
+
+typedef struct g3d__pickle {
+    g3d__pv **pool;            /* every value allocated, freed together */
+    int64_t n_pool, cap_pool;
+    g3d__pv *root;
+} g3d__pickle;
+
+/* Unpickles `n` bytes (protocols 2-4 as written by torch.save); only plain containers,
+ * OrderedDict, torch storages (persistent ids) and _rebuild_tensor_v2/_rebuild_parameter are
+ * allowed; any other global fails with its name. `label` names the stream in messages.
+ * Free with g3d__pickle_free even on failure. */
+g3d_status g3d__pickle_load(g3d__pickle *pk, const unsigned char *buf, size_t n, const char *label);
+void g3d__pickle_free(g3d__pickle *pk);
