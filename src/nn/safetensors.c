@@ -1,142 +1,131 @@
-/* safetensors.c - index of a memory-mapped .safetensors file.
- *
- * Layout: u64 little-endian header length N, N bytes of JSON
- * {"name": {"dtype": "F16", "shape": [..], "data_offsets": [begin, end]}, "__metadata__": {..}},
- * then the data section; offsets are relative to its start. Everything is validated here,
- * before any tensor byte is used: lengths, dtypes, shape x dtype size == byte length, bounds,
- * and that no two tensors overlap.
- */
+/* The safetensors format: an 8-byte little-endian header length, a JSON header mapping tensor
+ * names to {dtype, shape, data_offsets}, then the raw data. Every field is checked before use. */
 #include "ckpt_int.h"
 
-#include <cjson/cJSON.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-/* Headers beyond this are absurd (the format's own reference reader uses the same bound). */
-#define G3D_ST_MAX_HEADER (100u * 1024u * 1024u)
+#define MAX_HEADER_BYTES ((uint64_t)100 << 20)
+#define MAX_ELEMENTS ((int64_t)1 << 40)
 
-typedef struct { uint64_t begin, end; int64_t idx; } st_range;
-
-static int cmp_range(const void *a, const void *b)
+static int parse_dtype(const char *s, g3d_dtype *t)
 {
-    const st_range *x = a, *y = b;
-    return x->begin < y->begin ? -1 : x->begin > y->begin ? 1 : (x->end < y->end ? -1 : x->end > y->end);
+    for (int i = 0; i < G3D_DT_COUNT; i++)
+        if (!strcmp(s, g3d_dtype_name((g3d_dtype)i))) { *t = (g3d_dtype)i; return 1; }
+    return 0;
 }
 
-/* A JSON number that is a non-negative integer representable exactly. */
-static int json_u64(const cJSON *j, uint64_t *out)
+/* Non-negative integer stored exactly in a JSON number. */
+static int json_u64(const cJSON *v, uint64_t *out)
 {
-    if (!cJSON_IsNumber(j)) return 0;
-    double v = j->valuedouble;
-    if (!(v >= 0 && v <= 9007199254740992.0) || v != (double)(uint64_t)v) return 0;
-    *out = (uint64_t)v;
+    if (!cJSON_IsNumber(v) || !(v->valuedouble >= 0) || v->valuedouble > 9007199254740992.0 || v->valuedouble != floor(v->valuedouble))
+        return 0;
+    *out = (uint64_t)v->valuedouble;
     return 1;
 }
 
-g3d_status g3d__safetensors_parse(g3d_ckpt *ck)
+typedef struct range { uint64_t begin, end; int64_t index; } range;
+
+static int cmp_range(const void *a, const void *b)
 {
-    const char *p = ck->path;
+    const range *x = a, *y = b;
+    if (x->begin != y->begin) return x->begin < y->begin ? -1 : 1;
+    return (x->end > y->end) - (x->end < y->end);
+}
+
+g3d_status g3d__safetensors_index(g3d_ckpt *ck)
+{
+    const char *L = ck->path;
+    if (ck->size < 8) return G3D_ERR(G3D_ERR_FORMAT, "%s: too short for a safetensors file (%zu bytes)", L, ck->size);
     uint64_t hlen = 0;
-    for (int i = 7; i >= 0; i--) hlen = (hlen << 8) | ck->map[i];
-    if (hlen > ck->map_size - 8)
-        return G3D_ERR(G3D_ERR_FORMAT, "%s: safetensors header length %llu runs past the end of the file (%zu bytes)",
-                       p, (unsigned long long)hlen, ck->map_size);
-    if (hlen > G3D_ST_MAX_HEADER)
-        return G3D_ERR(G3D_ERR_FORMAT, "%s: safetensors header of %llu bytes is absurdly large", p,
-                       (unsigned long long)hlen);
-    const char *hdr = (const char *)ck->map + 8;
-    const char *end = NULL;
-    cJSON *root = cJSON_ParseWithLengthOpts(hdr, (size_t)hlen, &end, 0);
-    /* Writers pad the header with spaces to align the data; anything else after it is corrupt. */
-    while (root && end && end < hdr + hlen && (*end == ' ' || *end == '\n' || *end == '\r' || *end == '\t'))
-        end++;
-    if (!root || !cJSON_IsObject(root) || end != hdr + hlen) {
+    for (int i = 7; i >= 0; i--) hlen = (hlen << 8) | ck->data[i];
+    if (hlen < 2 || hlen > MAX_HEADER_BYTES || hlen > ck->size - 8)
+        return G3D_ERR(G3D_ERR_FORMAT, "%s: not a safetensors file (header length %llu, file %zu bytes)", L, (unsigned long long)hlen, ck->size);
+    cJSON *root = cJSON_ParseWithLength((const char *)ck->data + 8, (size_t)hlen);
+    if (!cJSON_IsObject(root)) {
         cJSON_Delete(root);
-        return G3D_ERR(G3D_ERR_FORMAT, "%s: safetensors header is not a JSON object", p);
+        return G3D_ERR(G3D_ERR_FORMAT, "%s: safetensors header is not a JSON object", L);
     }
-    const unsigned char *data = ck->map + 8 + hlen;
-    uint64_t data_size = ck->map_size - 8 - hlen;
+    const unsigned char *base = ck->data + 8 + hlen;
+    uint64_t data_size = ck->size - 8 - hlen;
+    int64_t count = 0;
+    for (cJSON *e = root->child; e; e = e->next) count += strcmp(e->string, "__metadata__") != 0;
     g3d_status rc = G3D_OK;
-    st_range *rg = NULL;
-    int n_items = cJSON_GetArraySize(root);
-    rg = g3d_calloc((size_t)(n_items ? n_items : 1), sizeof *rg, "safetensors ranges");
-    if (!rg) { cJSON_Delete(root); return G3D_ERR_NOMEM; }
-    int64_t nr = 0;
-    for (cJSON *e = root->child; e; e = e->next) {
-        const char *name = e->string;
-        if (strcmp(name, "__metadata__") == 0) {
-            if (!cJSON_IsObject(e)) {
-                rc = G3D_ERR(G3D_ERR_FORMAT, "%s: __metadata__ is not a JSON object", p);
-                goto done;
-            }
+    range *r = malloc(sizeof(range) * (size_t)(count ? count : 1));
+    ck->tensors = calloc((size_t)(count ? count : 1), sizeof *ck->tensors);
+    if (!r || !ck->tensors) { rc = G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", L); goto done; }
+    for (cJSON *e = root->child; e && rc == G3D_OK; e = e->next) {
+        if (!strcmp(e->string, "__metadata__")) {
+            if (!cJSON_IsObject(e) || ck->meta) { rc = G3D_ERR(G3D_ERR_FORMAT, "%s: __metadata__ is not one JSON object", L); break; }
+            for (cJSON *m = e->child; m; m = m->next)
+                if (!cJSON_IsString(m)) { rc = G3D_ERR(G3D_ERR_FORMAT, "%s: __metadata__ value '%s' is not a string", L, m->string); break; }
+            if (rc == G3D_OK && !(ck->meta = cJSON_Duplicate(e, 1))) rc = G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", L);
             continue;
         }
-        const cJSON *jd = cJSON_GetObjectItemCaseSensitive(e, "dtype");
-        const cJSON *js = cJSON_GetObjectItemCaseSensitive(e, "shape");
-        const cJSON *jo = cJSON_GetObjectItemCaseSensitive(e, "data_offsets");
-        if (!cJSON_IsObject(e) || !cJSON_IsString(jd) || !cJSON_IsArray(js) || !cJSON_IsArray(jo) ||
-            cJSON_GetArraySize(jo) != 2) {
-            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: tensor '%s' needs dtype, shape and data_offsets [begin, end]", p, name);
-            goto done;
+        const char *name = e->string;
+        cJSON *dt = cJSON_GetObjectItemCaseSensitive(e, "dtype"), *sh = cJSON_GetObjectItemCaseSensitive(e, "shape"),
+              *off = cJSON_GetObjectItemCaseSensitive(e, "data_offsets");
+        g3d_tensor_info *t = &ck->tensors[ck->n];
+        if (!cJSON_IsObject(e) || !cJSON_IsString(dt) || !cJSON_IsArray(sh) || !cJSON_IsArray(off) || cJSON_GetArraySize(off) != 2) {
+            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: tensor '%s' lacks dtype, shape or data_offsets", L, name);
+            break;
         }
-        int dt = g3d__dtype_parse(jd->valuestring);
-        if (dt < 0) {
-            rc = G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: tensor '%s' has unsupported dtype '%s'", p, name, jd->valuestring);
-            goto done;
-        }
-        int ndim = cJSON_GetArraySize(js);
-        if (ndim > G3D_MAX_DIMS) {
-            rc = G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: tensor '%s' has %d dimensions (at most %d supported)", p, name,
-                         ndim, G3D_MAX_DIMS);
-            goto done;
-        }
-        int64_t shape[G3D_MAX_DIMS];
-        int k = 0;
-        for (const cJSON *d = js->child; d; d = d->next, k++) {
-            uint64_t v;
-            if (!json_u64(d, &v)) {
-                rc = G3D_ERR(G3D_ERR_FORMAT, "%s: tensor '%s' has a non-integer or negative dimension", p, name);
-                goto done;
+        if (!parse_dtype(dt->valuestring, &t->dtype)) { rc = G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: tensor '%s' has unsupported dtype '%s'", L, name, dt->valuestring); break; }
+        int nd = cJSON_GetArraySize(sh);
+        if (nd > G3D_MAX_DIMS) { rc = G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: tensor '%s' has %d dimensions (at most %d)", L, name, nd, G3D_MAX_DIMS); break; }
+        t->ndim = nd;
+        t->numel = 1;
+        for (int k = 0; k < nd; k++) {
+            uint64_t d;
+            if (!json_u64(cJSON_GetArrayItem(sh, k), &d) || d > (uint64_t)MAX_ELEMENTS ||
+                (d && (uint64_t)t->numel > (uint64_t)MAX_ELEMENTS / d)) {
+                rc = G3D_ERR(G3D_ERR_FORMAT, "%s: tensor '%s' has a bad or absurd shape", L, name);
+                break;
             }
-            shape[k] = (int64_t)v;
+            t->shape[k] = (int64_t)d;
+            t->numel *= (int64_t)d;
         }
+        if (rc != G3D_OK) break;
         uint64_t b, en;
-        if (!json_u64(jo->child, &b) || !json_u64(jo->child->next, &en) || en < b || en > data_size) {
-            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: tensor '%s' data_offsets lie outside the data section (%llu bytes)", p,
-                         name, (unsigned long long)data_size);
-            goto done;
+        if (!json_u64(cJSON_GetArrayItem(off, 0), &b) || !json_u64(cJSON_GetArrayItem(off, 1), &en) || b > en || en > data_size) {
+            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: tensor '%s' has bad data offsets (the data section holds %llu bytes)", L, name, (unsigned long long)data_size);
+            break;
         }
-        int64_t numel = g3d__ckpt_numel(ndim, shape);
-        if (numel < 0 || (uint64_t)numel > UINT64_MAX / 8 ||
-            (uint64_t)numel * g3d_dtype_size((g3d_dtype)dt) != en - b) {
-            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: tensor '%s' (%s, %lld elements) does not match its %llu data bytes", p,
-                         name, jd->valuestring, (long long)numel, (unsigned long long)(en - b));
-            goto done;
+        if (en - b != (uint64_t)t->numel * g3d_dtype_size(t->dtype)) {
+            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: tensor '%s' holds %llu bytes but %s x %lld elements need %llu", L, name,
+                         (unsigned long long)(en - b), g3d_dtype_name(t->dtype), (long long)t->numel,
+                         (unsigned long long)((uint64_t)t->numel * g3d_dtype_size(t->dtype)));
+            break;
         }
-        rc = g3d__ckpt_add(ck, name, (g3d_dtype)dt, ndim, shape, data + b);
-        if (rc != G3D_OK) goto done;
-        rg[nr].begin = b;
-        rg[nr].end = en;
-        rg[nr].idx = ck->n - 1;
-        nr++;
+        char *copy = malloc(strlen(name) + 1);
+        if (!copy) { rc = G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", L); break; }
+        strcpy(copy, name);
+        t->name = copy;
+        t->data = base + b;
+        r[ck->n].begin = b;
+        r[ck->n].end = en;
+        r[ck->n].index = ck->n;
+        ck->n++;
     }
-    qsort(rg, (size_t)nr, sizeof *rg, cmp_range);
-    /* After sorting by start, a non-empty range overlaps an earlier one iff it starts before
-     * the furthest end seen so far. */
-    int64_t far = -1;
-    for (int64_t i = 0; i < nr; i++) {
-        if (rg[i].end == rg[i].begin) continue;
-        if (far >= 0 && rg[i].begin < rg[far].end) {
-            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: tensors '%s' and '%s' overlap in the data section", p,
-                         ck->t[rg[far].idx].name, ck->t[rg[i].idx].name);
-            goto done;
+    if (rc == G3D_OK) {
+        /* Sorted by start, a tensor overlaps an earlier one iff it starts before the furthest
+         * end seen so far (empty tensors occupy nothing). */
+        qsort(r, (size_t)ck->n, sizeof *r, cmp_range);
+        uint64_t far = 0;
+        int64_t far_i = -1;
+        for (int64_t i = 0; i < ck->n; i++) {
+            if (r[i].end == r[i].begin) continue;
+            if (far_i >= 0 && r[i].begin < far) {
+                rc = G3D_ERR(G3D_ERR_FORMAT, "%s: tensors '%s' and '%s' overlap in the file", L, ck->tensors[r[far_i].index].name,
+                             ck->tensors[r[i].index].name);
+                break;
+            }
+            if (r[i].end > far) { far = r[i].end; far_i = i; }
         }
-        if (far < 0 || rg[i].end > rg[far].end) far = i;
     }
-    cJSON *meta = cJSON_DetachItemFromObjectCaseSensitive(root, "__metadata__");
-    ck->meta = meta;
 done:
-    free(rg);
+    free(r);
     cJSON_Delete(root);
     return rc;
 }
