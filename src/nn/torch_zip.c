@@ -443,7 +443,8 @@ static g3d_status walk_value(walk *w, const value *v, const char *path, cJSON **
         for (int64_t k = 0; k < v->n && *json; k++) {
             cJSON *c;
             snprintf(sub, sizeof sub, "%s%s%lld", path, *path ? "." : "", (long long)k);
-            G3D_TRY(walk_value(w, v->items[k], sub, &c));
+            g3d_status rc = walk_value(w, v->items[k], sub, &c);
+            if (rc != G3D_OK) { cJSON_Delete(*json); *json = NULL; return rc; }
             cJSON_AddItemToArray(*json, c);
         }
         break;
@@ -454,10 +455,15 @@ static g3d_status walk_value(walk *w, const value *v, const char *path, cJSON **
             char kbuf[32];
             const char *ks = key->kind == V_STR ? key->s : NULL;
             if (key->kind == V_INT) { snprintf(kbuf, sizeof kbuf, "%lld", (long long)key->i); ks = kbuf; }
-            if (!ks) return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: a dict key in data.pkl is neither a string nor an integer", w->ck->path);
             cJSON *c;
-            snprintf(sub, sizeof sub, "%s%s%s", path, *path ? "." : "", ks);
-            G3D_TRY(walk_value(w, v->items[k + 1], sub, &c));
+            g3d_status rc = G3D_OK;
+            if (!ks) {
+                rc = G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: a dict key in data.pkl is neither a string nor an integer", w->ck->path);
+            } else {
+                snprintf(sub, sizeof sub, "%s%s%s", path, *path ? "." : "", ks);
+                rc = walk_value(w, v->items[k + 1], sub, &c);
+            }
+            if (rc != G3D_OK) { cJSON_Delete(*json); *json = NULL; return rc; }
             cJSON_AddItemToObject(*json, ks, c);
         }
         break;
@@ -509,7 +515,7 @@ g3d_status g3d__torch_index(g3d_ckpt *ck)
     memset(&u, 0, sizeof u);
     u.label = ck->path;
     u.p = buf;
-    u.end = buf + n;
+    u.end = buf ? buf + n : buf;
     value *root = NULL;
     if (rc == G3D_OK) rc = run_pickle(&u, &root);
     if (rc == G3D_OK) {
