@@ -188,7 +188,7 @@ TEST(hostile_pickles)
     CHECK_OK(g3d_ckpt_open(FIXDIR "ok_handmade.pth", &ck));
     g3d_ckpt_free(ck);
     const char *bad[] = {"evil.pth", "noncontig.pth", "overrun.pth", "missing_storage.pth", "short_storage.pth",
-                         "truncated.pth", "badop.pth", "underflow.pth", "leftover.pth"};
+                         "truncated.pth", "badop.pth", "underflow.pth", "leftover.pth", "ckpt_selfref.pth"};
     for (size_t k = 0; k < sizeof bad / sizeof *bad; k++) {
         char path[1024];
         snprintf(path, sizeof path, FIXDIR "%s", bad[k]);
