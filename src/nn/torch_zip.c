@@ -379,7 +379,7 @@ typedef struct walk {
 /* A memoised container can hold itself, and shared references can make a tiny pickle describe
  * a huge tree: bound both the nesting and the number of values visited. */
 #define WALK_MAX_DEPTH 64
-#define WALK_MAX_VISITS (1 << 22)
+#define WALK_MAX_VISITS (1 << 20)
 
 static g3d_status add_tensor(walk *w, const char *name, const value *t)
 {
