@@ -188,7 +188,7 @@ TEST(hostile_pickles)
     CHECK_OK(g3d_ckpt_open(FIXDIR "ok_handmade.pth", &ck));
     g3d_ckpt_free(ck);
     const char *bad[] = {"evil.pth", "noncontig.pth", "overrun.pth", "missing_storage.pth", "short_storage.pth",
-                         "truncated.pth", "badop.pth", "underflow.pth", "leftover.pth"};
+                         "truncated.pth", "badop.pth", "underflow.pth", "leftover.pth", "ckpt_selfref.pth"};
     for (size_t k = 0; k < sizeof bad / sizeof *bad; k++) {
         char path[1024];
         snprintf(path, sizeof path, FIXDIR "%s", bad[k]);
@@ -200,6 +200,64 @@ TEST(hostile_pickles)
     CHECK_FAILS(g3d_ckpt_open(FIXDIR "resize_ref.npz", &ck));
 }
 
+
+/* Checkpoints written by torch.save (tests/fixtures/make_ckpt_fixtures.py). */
+TEST(torch_save_fixtures)
+{
+    g3d_ckpt *ck = NULL;
+    float v[12];
+    int64_t s23[2] = {2, 3};
+    CHECK_OK(g3d_ckpt_open(FIXDIR "ckpt_dtypes.pt", &ck));
+    if (ck) {
+        const char *exact[] = {"layer.f32", "layer.f16", "layer.bf16", "layer.f64"};
+        for (int k = 0; k < 4; k++) {
+            CHECK_OK(g3d_ckpt_read(ck, exact[k], 2, s23, v));
+            for (int i = 0; i < 6; i++) CHECK(v[i] == (float)(i * 0.5 - 1));
+        }
+        /* Casting to integers truncates toward zero in torch. */
+        const float ints[6] = {-1, 0, 0, 0, 1, 1};
+        CHECK_OK(g3d_ckpt_read(ck, "layer.i64", 2, s23, v));
+        for (int i = 0; i < 6; i++) CHECK(v[i] == ints[i]);
+        CHECK_OK(g3d_ckpt_read(ck, "layer.i8", 2, s23, v));
+        for (int i = 0; i < 6; i++) CHECK(v[i] == ints[i]);
+        CHECK_OK(g3d_ckpt_read(ck, "layer.b", 2, s23, v));
+        for (int i = 0; i < 6; i++) CHECK(v[i] == (i == 2 ? 0.0f : 1.0f));
+        CHECK(g3d_ckpt_find(ck, "layer.bf16")->dtype == G3D_DT_BF16);
+        g3d_ckpt_free(ck);
+    }
+    ck = NULL;
+    CHECK_OK(g3d_ckpt_open(FIXDIR "ckpt_nested.pt", &ck));
+    if (ck) {
+        /* Two views into one shared storage: offsets 4 and 20. */
+        int64_t s34[2] = {3, 4}, s4 = 4;
+        CHECK_OK(g3d_ckpt_read(ck, "enc.w", 2, s34, v));
+        for (int i = 0; i < 12; i++) CHECK(v[i] == (float)(4 + i));
+        CHECK_OK(g3d_ckpt_read(ck, "enc.b", 1, &s4, v));
+        for (int i = 0; i < 4; i++) CHECK(v[i] == (float)(20 + i));
+        CHECK(g3d_ckpt_count(ck) == 3);
+        const cJSON *cfg = cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "config");
+        const cJSON *sc = cJSON_GetObjectItemCaseSensitive(cfg, "scale");
+        const cJSON *pair = cJSON_GetObjectItemCaseSensitive(cfg, "pair");
+        CHECK(cJSON_IsNumber(sc) && sc->valuedouble == 0.25);
+        CHECK(cJSON_GetArraySize(pair) == 2 && cJSON_GetArrayItem(pair, 1)->valuedouble == -300000);
+        g3d_ckpt_free(ck);
+    }
+    ck = NULL;
+    CHECK_FAILS(g3d_ckpt_open(FIXDIR "ckpt_noncontig.pt", &ck));
+    CHECK(strstr(g3d_error_message(), "contiguous"));
+    CHECK_OK(g3d_ckpt_open(FIXDIR "ckpt_lists.pt", &ck));
+    if (ck) {
+        CHECK(g3d_ckpt_count(ck) == 3);
+        /* List and tuple elements are named by their index. */
+        CHECK_OK(g3d_ckpt_read(ck, "a.1.0", 0, NULL, v));
+        CHECK(v[0] == 1.0f);
+        CHECK(g3d_ckpt_find(ck, "a.0") && g3d_ckpt_find(ck, "a.0")->numel == 2);
+        CHECK_OK(g3d_ckpt_read(ck, "b", 0, NULL, v));
+        CHECK(v[0] == 7.0f);
+        g3d_ckpt_free(ck);
+    }
+}
+
 int main(void)
 {
     RUN(golden_weights);
@@ -207,5 +265,6 @@ int main(void)
     RUN(hostile_headers);
     RUN(pytorch_zip);
     RUN(hostile_pickles);
+    RUN(torch_save_fixtures);
     return test_summary();
 }

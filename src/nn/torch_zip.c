@@ -372,7 +372,14 @@ typedef struct walk {
     const g3d_zip *zip;
     const char *prefix;   /* archive folder, e.g. "state" */
     int64_t cap;
+    int depth;            /* nesting of the value being walked */
+    int64_t visits;       /* values walked so far */
 } walk;
+
+/* A memoised container can hold itself, and shared references can make a tiny pickle describe
+ * a huge tree: bound both the nesting and the number of values visited. */
+#define WALK_MAX_DEPTH 64
+#define WALK_MAX_VISITS (1 << 20)
 
 static g3d_status add_tensor(walk *w, const char *name, const value *t)
 {
@@ -423,10 +430,23 @@ static g3d_status add_tensor(walk *w, const char *name, const value *t)
 
 /* Walks the object: tensors are indexed under their dotted path; everything else becomes JSON
  * with tensors replaced by their names. */
+static g3d_status walk_children(walk *w, const value *v, const char *path, char *sub, cJSON **json);
+
 static g3d_status walk_value(walk *w, const value *v, const char *path, cJSON **json)
 {
     char sub[1024];
     *json = NULL;
+    if (w->depth >= WALK_MAX_DEPTH || ++w->visits > WALK_MAX_VISITS)
+        return G3D_ERR(G3D_ERR_FORMAT, "%s: data.pkl nests deeper than %d levels, refers to itself, or is too large",
+                       w->ck->path, WALK_MAX_DEPTH);
+    w->depth++;
+    g3d_status rc = walk_children(w, v, path, sub, json);
+    w->depth--;
+    return rc;
+}
+
+static g3d_status walk_children(walk *w, const value *v, const char *path, char *sub, cJSON **json)
+{
     switch (v->kind) {
     case V_NONE: *json = cJSON_CreateNull(); break;
     case V_BOOL: *json = cJSON_CreateBool((int)v->i); break;
@@ -442,8 +462,9 @@ static g3d_status walk_value(walk *w, const value *v, const char *path, cJSON **
         *json = cJSON_CreateArray();
         for (int64_t k = 0; k < v->n && *json; k++) {
             cJSON *c;
-            snprintf(sub, sizeof sub, "%s%s%lld", path, *path ? "." : "", (long long)k);
-            G3D_TRY(walk_value(w, v->items[k], sub, &c));
+            snprintf(sub, 1024, "%s%s%lld", path, *path ? "." : "", (long long)k);
+            g3d_status rc = walk_value(w, v->items[k], sub, &c);
+            if (rc != G3D_OK) { cJSON_Delete(*json); *json = NULL; return rc; }
             cJSON_AddItemToArray(*json, c);
         }
         break;
@@ -454,10 +475,15 @@ static g3d_status walk_value(walk *w, const value *v, const char *path, cJSON **
             char kbuf[32];
             const char *ks = key->kind == V_STR ? key->s : NULL;
             if (key->kind == V_INT) { snprintf(kbuf, sizeof kbuf, "%lld", (long long)key->i); ks = kbuf; }
-            if (!ks) return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: a dict key in data.pkl is neither a string nor an integer", w->ck->path);
             cJSON *c;
-            snprintf(sub, sizeof sub, "%s%s%s", path, *path ? "." : "", ks);
-            G3D_TRY(walk_value(w, v->items[k + 1], sub, &c));
+            g3d_status rc = G3D_OK;
+            if (!ks) {
+                rc = G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: a dict key in data.pkl is neither a string nor an integer", w->ck->path);
+            } else {
+                snprintf(sub, 1024, "%s%s%s", path, *path ? "." : "", ks);
+                rc = walk_value(w, v->items[k + 1], sub, &c);
+            }
+            if (rc != G3D_OK) { cJSON_Delete(*json); *json = NULL; return rc; }
             cJSON_AddItemToObject(*json, ks, c);
         }
         break;
@@ -468,12 +494,14 @@ static g3d_status walk_value(walk *w, const value *v, const char *path, cJSON **
     return G3D_OK;
 }
 
-static int holds_tensor(const value *v)
+/* Past the bounds it answers "no"; walk_value then reports the problem. */
+static int holds_tensor(const value *v, int depth, int64_t *visits)
 {
+    if (depth >= WALK_MAX_DEPTH || ++*visits > WALK_MAX_VISITS) return 0;
     if (v->kind == V_TENSOR) return 1;
     if (v->kind == V_DICT || v->kind == V_LIST || v->kind == V_TUPLE)
         for (int64_t k = 0; k < v->n; k++)
-            if (holds_tensor(v->items[k])) return 1;
+            if (holds_tensor(v->items[k], depth + 1, visits)) return 1;
     return 0;
 }
 
@@ -509,19 +537,20 @@ g3d_status g3d__torch_index(g3d_ckpt *ck)
     memset(&u, 0, sizeof u);
     u.label = ck->path;
     u.p = buf;
-    u.end = buf + n;
+    u.end = buf ? buf + n : buf;
     value *root = NULL;
     if (rc == G3D_OK) rc = run_pickle(&u, &root);
     if (rc == G3D_OK) {
-        walk w = {ck, &zip, prefix, 0};
+        walk w = {ck, &zip, prefix, 0, 0, 0};
         /* {'model': state_dict, ...}: when exactly one top-level entry holds tensors and it is
          * a dict, tensors are named by their state-dict keys without that wrapper key. */
         const value *tensors_at = root;
         const char *strip = NULL;
+        int64_t visits = 0;
         if (root->kind == V_DICT) {
             int holders = 0;
             for (int64_t k = 0; k + 1 < root->n; k += 2)
-                if (holds_tensor(root->items[k + 1])) { holders++; tensors_at = root->items[k + 1]; strip = root->items[k]->kind == V_STR ? root->items[k]->s : NULL; }
+                if (holds_tensor(root->items[k + 1], 1, &visits)) { holders++; tensors_at = root->items[k + 1]; strip = root->items[k]->kind == V_STR ? root->items[k]->s : NULL; }
             if (holders != 1 || tensors_at->kind != V_DICT || !strip) { tensors_at = root; strip = NULL; }
         }
         cJSON *json = NULL;
