@@ -109,10 +109,51 @@ TEST(wrong_checkpoint_refused)
     CHECK(m == NULL);
 }
 
+/* Renames one tensor in the safetensors header (same length, so offsets stay valid) and
+ * expects loading to fail with a message naming the tensor the model needs. */
+static void expect_missing(const unsigned char *file, size_t n, const char *tensor)
+{
+    unsigned char *copy = malloc(n);
+    memcpy(copy, file, n);
+    size_t len = strlen(tensor), hdr = 8 + (size_t)copy[0] + ((size_t)copy[1] << 8) + ((size_t)copy[2] << 16);
+    int renamed = 0;
+    for (size_t i = 8; i + len + 1 < hdr && !renamed; i++)
+        if (copy[i - 1] == '"' && !memcmp(copy + i, tensor, len) && copy[i + len] == '"') {
+            copy[i + len - 1] = 'X';
+            renamed = 1;
+        }
+    CHECK_MSG(renamed, "%s not found in the header", tensor);
+    g3d_ckpt *ck = NULL;
+    g3d_dav2 *m = NULL;
+    CHECK_OK(g3d_ckpt_open_memory(copy, n, "renamed.safetensors", &ck));
+    if (ck) {
+        CHECK_FAILS(g3d_dav2_load(ck, &m));
+        CHECK(m == NULL);
+        CHECK_MSG(strstr(g3d_error_message(), tensor) != NULL, "message does not name %s", tensor);
+    }
+    g3d_ckpt_free(ck);
+    free(copy);
+}
+
+TEST(missing_tensor_named)
+{
+    unsigned char *file = NULL;
+    size_t n = 0;
+    CHECK_OK(g3d_read_file(test_shared(GOLDEN "weights.safetensors"), (size_t)1 << 30, &file, &n));
+    if (!file) return;
+    expect_missing(file, n, "pretrained.blocks.7.mlp.fc2.bias");
+    expect_missing(file, n, "pretrained.norm.weight");
+    expect_missing(file, n, "depth_head.resize_layers.1.weight");
+    expect_missing(file, n, "depth_head.scratch.refinenet2.resConfUnit1.conv2.bias");
+    expect_missing(file, n, "depth_head.scratch.output_conv2.2.weight");
+    free(file);
+}
+
 int main(void)
 {
     RUN(net_size_rule);
     RUN(wrong_checkpoint_refused);
+    RUN(missing_tensor_named);
     RUN(golden_vits);
     return test_summary();
 }

@@ -64,6 +64,12 @@ TEST(conv2d_matches_definition)
         }
     }
     CHECK_FAILS(g3d_nn_conv2d(x, cin, 1, 1, wt, b, cout, 3, 1, 0, y));
+    /* inputs narrower than the kernel: most taps fall in the padding */
+    for (int s = 1; s <= 2; s++) {
+        CHECK_OK(g3d_nn_conv2d(x, cin, 1, 2, wt, b, cout, 3, s, 1, y));
+        conv_ref(x, cin, 1, 2, wt, b, cout, 3, s, 1, ref);
+        CHECK(max_abs_diff(y, ref, (size_t)cout * g3d_nn_conv_out(2, 3, s, 1)) < 1e-5);
+    }
 }
 
 TEST(conv2d_in_row_bands)

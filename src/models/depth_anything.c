@@ -55,8 +55,8 @@ void g3d_dav2_free(g3d_dav2 *m)
         free_conv(&m->project[i]);
         free_conv(&m->resize[i]);
         free_conv(&m->rn[i]);
-        conv *f = &m->refine[i].rcu1a;
-        for (int j = 0; j < 5; j++) free_conv(&f[j]);
+        fusion *f = &m->refine[i];
+        free_conv(&f->rcu1a); free_conv(&f->rcu1b); free_conv(&f->rcu2a); free_conv(&f->rcu2b); free_conv(&f->out);
     }
     free_conv(&m->out1);
     free_conv(&m->out2a);
@@ -81,11 +81,12 @@ static g3d_status load_head(const g3d_ckpt *ck, g3d_dav2 *m)
         G3D_TRY(load_conv(ck, name, F, m->oc[i], 3, 0, &m->rn[i]));
         static const char *parts[] = {"resConfUnit1.conv1", "resConfUnit1.conv2", "resConfUnit2.conv1",
                                       "resConfUnit2.conv2", "out_conv"};
-        conv *f = &m->refine[i].rcu1a;
+        fusion *f = &m->refine[i];
+        conv *dst[] = {&f->rcu1a, &f->rcu1b, &f->rcu2a, &f->rcu2b, &f->out};
         /* refinenet4 has no skip input, so its first residual unit is never used. */
         for (int j = i == 3 ? 2 : 0; j < 5; j++) {
             snprintf(name, sizeof name, "depth_head.scratch.refinenet%d.%s", i + 1, parts[j]);
-            G3D_TRY(load_conv(ck, name, F, F, j == 4 ? 1 : 3, 1, &f[j]));
+            G3D_TRY(load_conv(ck, name, F, F, j == 4 ? 1 : 3, 1, dst[j]));
         }
     }
     G3D_TRY(load_conv(ck, "depth_head.scratch.output_conv1", F / 2, F, 3, 1, &m->out1));

@@ -56,8 +56,9 @@ void g3d_dinov2_free(g3d_dinov2 *m)
     free(m->cls); free(m->pos); free(m->pew); free(m->peb); free(m->normw); free(m->normb);
     if (m->blocks) {
         for (int i = 0; i < m->depth; i++) {
-            float **f = (float **)&m->blocks[i];
-            for (size_t j = 0; j < sizeof(dino_block) / sizeof(float *); j++) free(f[j]);
+            dino_block *b = &m->blocks[i];
+            free(b->n1w); free(b->n1b); free(b->qkvw); free(b->qkvb); free(b->projw); free(b->projb); free(b->ls1);
+            free(b->n2w); free(b->n2b); free(b->fc1w); free(b->fc1b); free(b->fc2w); free(b->fc2b); free(b->ls2);
         }
         free(m->blocks);
     }

@@ -58,10 +58,17 @@ g3d_status g3d_nn_conv2d(const float *x, int cin, int h, int w, const float *wt,
                     continue;
                 }
                 const float *srow = src + (size_t)iy * w;
-                for (int ox = 0; ox < wo; ox++) {
-                    int ix = ox * stride - pad + kx;
-                    row[ox] = (ix >= 0 && ix < w) ? srow[ix] : 0.0f;
-                }
+                /* valid outputs: 0 <= ox*stride - pad + kx < w */
+                int lo = kx < pad ? (pad - kx + stride - 1) / stride : 0;
+                int last = w - 1 + pad - kx, hi = last < 0 ? 0 : last / stride + 1;
+                hi = hi > wo ? wo : hi;
+                lo = lo > hi ? hi : lo;
+                for (int ox = 0; ox < lo; ox++) row[ox] = 0.0f;
+                if (stride == 1)
+                    memcpy(row + lo, srow + lo - pad + kx, sizeof(float) * (size_t)(hi - lo));
+                else
+                    for (int ox = lo; ox < hi; ox++) row[ox] = srow[ox * stride - pad + kx];
+                for (int ox = hi; ox < wo; ox++) row[ox] = 0.0f;
             }
         }
         cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, cout, nc, kk, 1.0f, wt, kk, col, nc, b ? 1.0f : 0.0f,
