@@ -2,15 +2,7 @@
 # gen3d depth: output at the image's size, deterministic, refusals leave nothing behind.
 set -u
 T="$G3D_TEST_TMP/cli_depth"
-rm -rf "$T"; mkdir -p "$T"
-pass=0; fail=0
-ok()  { pass=$((pass + 1)); echo "ok   $1"; }
-bad() { fail=$((fail + 1)); echo "FAIL $1"; }
-expect() {
-    code=$1; name=$2; shift 2
-    "$@" >"$T/out" 2>"$T/err"; rc=$?
-    if [ "$rc" -eq "$code" ]; then ok "$name"; else bad "$name (exit $rc, expected $code)"; sed 's/^/    /' "$T/err"; fi
-}
+. "$G3D_SOURCE_DIR/tests/cli_lib.sh"
 W="$G3D_SHARED_DIR/golden/depth_anything_v2_vits/weights.safetensors"
 I="$G3D_SHARED_DIR/testdata/demo_inputs/images/ld_Image012_whitecat.jpg"
 
@@ -34,5 +26,4 @@ grep -q "depth_head" "$T/err" && ok "error names the tensor" || bad "error names
 expect 1 "missing image" "$GEN3D" depth -q -m "$W" -i "$T/nope.png" -o "$T/c.npy"
 [ ! -e "$T/c.npy" ] && ok "no output after failures" || bad "no output after failures"
 
-echo "$pass passed, $fail failed"
-[ "$fail" -eq 0 ]
+finish
