@@ -1,0 +1,31 @@
+#!/bin/sh
+# gen3d train on a dataset written by gen3d world: outputs, determinism, refusals.
+set -u
+T="$G3D_TEST_TMP/cli_train"
+. "$G3D_SOURCE_DIR/tests/cli_lib.sh"
+MB="$G3D_SHARED_DIR/testdata/middlebury2014_motorcycle_skimage"
+
+expect 0 "train help" "$GEN3D" train --help
+grep -q -- "--iters N" "$T/out" && ok "help lists --iters" || bad "help lists --iters"
+expect 0 "world dataset" "$GEN3D" world --default-input "$MB" --trajectory orbit_left --steps 1 --extra 2 --max-side 96 -q -o "$T/data"
+expect 0 "train" "$GEN3D" train --data "$T/data" --iters 60 --sh-degree 1 -q -t 2 -o "$T/a"
+for f in scene.ply scene.spz train.json; do
+    [ -s "$T/a/$f" ] && ok "wrote $f" || bad "wrote $f"
+done
+expect 0 "info on the trained scene" "$GEN3D" info "$T/a/scene.ply"
+grep -q "3D Gaussian splats" "$T/out" && grep -q "SH degree 1" "$T/out" && ok "standard 3DGS PLY" || bad "standard 3DGS PLY"
+expect 0 "train again" "$GEN3D" train --data "$T/data" --iters 60 --sh-degree 1 -q -t 2 -o "$T/b"
+cmp -s "$T/a/scene.ply" "$T/b/scene.ply" && ok "same seed and threads, same scene" || bad "same seed and threads, same scene"
+expect 0 "downscaled" "$GEN3D" train --data "$T/data" --iters 10 --downscale 2 -q -o "$T/c"
+
+expect 2 "no data" "$GEN3D" train -o "$T/never"
+expect 2 "zero iterations" "$GEN3D" train --data "$T/data" --iters 0 -o "$T/never"
+expect 2 "bad SH degree" "$GEN3D" train --data "$T/data" --sh-degree 4 -o "$T/never"
+expect 1 "missing folder" "$GEN3D" train --data "$T/nothing" -o "$T/never"
+cp -r "$T/data" "$T/bad"
+"$GEN3D" scene --width 40 --height 30 -q -o "$T/small" >/dev/null 2>&1
+cp "$T/small/rgb_000.png" "$T/bad/views/view_001.png"
+expect 1 "image of the wrong size" "$GEN3D" train --data "$T/bad" --iters 5 -o "$T/never"
+grep -q "view_001.png" "$T/err" && ok "names the image" || bad "names the image"
+[ ! -e "$T/never" ] && ok "no output after failures" || bad "no output after failures"
+finish
