@@ -192,6 +192,12 @@ g3d_status g3d_atomic_dir_begin(const char *path, char **tmp_out);
 g3d_status g3d_atomic_dir_commit(const char *tmp, const char *path);
 void       g3d_atomic_dir_abort(const char *tmp);
 
+/* Sorts n floats ascending, in place. */
+void g3d_sort_f32(float *v, size_t n);
+/* Median of n >= 1 floats (the middle value, or the mean of the two middle ones); sorts v in
+ * place. */
+float g3d_median_f32(float *v, size_t n);
+
 /* Reads a whole file into a malloc'd buffer (+1 NUL byte not counted in *n). Caller frees.
  * Files above max_bytes are rejected (G3D_ERR_FORMAT). */
 g3d_status g3d_read_file(const char *path, size_t max_bytes, unsigned char **data, size_t *n);

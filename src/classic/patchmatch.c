@@ -395,12 +395,6 @@ static void pm_pass(const level *L, nnf *f, int backward, g3d_rng *rng)
     }
 }
 
-static int cmp_float(const void *a, const void *b)
-{
-    float x = *(const float *)a, y = *(const float *)b;
-    return (x > y) - (x < y);
-}
-
 /* Recomputes every target's distance against the current image (the hole changed). */
 static void refresh_dist(const level *L, nnf *f)
 {
@@ -429,7 +423,7 @@ static g3d_status vote(level *L, const nnf *f, int sharp)
     size_t nt = 0;
     for (size_t i = 0; i < n; i++)
         if (f->src[i] >= 0) dn[nt++] = f->dist[i] / (float)(c * (2 * r + 1) * (2 * r + 1));
-    qsort(dn, nt, sizeof *dn, cmp_float);
+    g3d_sort_f32(dn, nt);
     float s2 = nt ? dn[(nt * 3) / 4] : 0.f;
     if (s2 < 1e-6f) s2 = 1e-6f;
     for (size_t i = 0; i < n; i++) {

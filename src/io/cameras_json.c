@@ -209,6 +209,17 @@ g3d_status g3d_cameras_json_read(const char *path, g3d_camera_list *l)
 
 /* ---- transforms.json ---------------------------------------------------------------------- */
 
+/* nerfstudio's intrinsics fields (pixel centres at +0.5, see the header). */
+static void add_ns_intrinsics(cJSON *o, const g3d_intrinsics *K)
+{
+    cJSON_AddNumberToObject(o, "fl_x", K->fx);
+    cJSON_AddNumberToObject(o, "fl_y", K->fy);
+    cJSON_AddNumberToObject(o, "cx", K->cx + 0.5);
+    cJSON_AddNumberToObject(o, "cy", K->cy + 0.5);
+    cJSON_AddNumberToObject(o, "w", K->width);
+    cJSON_AddNumberToObject(o, "h", K->height);
+}
+
 g3d_status g3d_transforms_json_write(const char *path, const g3d_camera_list *l)
 {
     cJSON *root = cJSON_CreateObject(), *frames = cJSON_CreateArray();
@@ -216,13 +227,7 @@ g3d_status g3d_transforms_json_write(const char *path, const g3d_camera_list *l)
     if (l->n > 0) {
         /* Shared intrinsics at the top level (from the first frame); frames that differ
          * repeat theirs. */
-        const g3d_intrinsics *K = &l->cams[0].K;
-        cJSON_AddNumberToObject(root, "fl_x", K->fx);
-        cJSON_AddNumberToObject(root, "fl_y", K->fy);
-        cJSON_AddNumberToObject(root, "cx", K->cx + 0.5);
-        cJSON_AddNumberToObject(root, "cy", K->cy + 0.5);
-        cJSON_AddNumberToObject(root, "w", K->width);
-        cJSON_AddNumberToObject(root, "h", K->height);
+        add_ns_intrinsics(root, &l->cams[0].K);
     }
     for (int i = 0; i < l->n; i++) {
         const g3d_camera *c = &l->cams[i];
@@ -232,14 +237,7 @@ g3d_status g3d_transforms_json_write(const char *path, const g3d_camera_list *l)
         snprintf(fallback, sizeof fallback, "frame_%05d", i);
         cJSON_AddStringToObject(f, "file_path", l->names[i] ? l->names[i] : fallback);
         if (l->mask_paths[i]) cJSON_AddStringToObject(f, "mask_path", l->mask_paths[i]);
-        if (memcmp(&c->K, K0, sizeof *K0) != 0) {
-            cJSON_AddNumberToObject(f, "fl_x", c->K.fx);
-            cJSON_AddNumberToObject(f, "fl_y", c->K.fy);
-            cJSON_AddNumberToObject(f, "cx", c->K.cx + 0.5);
-            cJSON_AddNumberToObject(f, "cy", c->K.cy + 0.5);
-            cJSON_AddNumberToObject(f, "w", c->K.width);
-            cJSON_AddNumberToObject(f, "h", c->K.height);
-        }
+        if (memcmp(&c->K, K0, sizeof *K0) != 0) add_ns_intrinsics(f, &c->K);
         cJSON_AddItemToObject(f, "transform_matrix", matrix_json(g3d_pose_opencv_to_opengl(c->c2w)));
         cJSON_AddItemToArray(frames, f);
     }

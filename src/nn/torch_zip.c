@@ -564,10 +564,8 @@ g3d_status g3d__torch_index(g3d_ckpt *ck)
                     const value *key = root->items[k];
                     if (key->kind == V_STR && key->s == strip) { cJSON_AddItemToObject(json, key->s, sd); sd = NULL; continue; }
                     cJSON *c = NULL;
-                    walk plain = w;
-                    rc = key->kind == V_STR ? walk_value(&plain, root->items[k + 1], key->s, &c)
+                    rc = key->kind == V_STR ? walk_value(&w, root->items[k + 1], key->s, &c)
                                             : G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: a top-level key is not a string", ck->path);
-                    w.cap = plain.cap;
                     if (rc == G3D_OK) cJSON_AddItemToObject(json, key->s, c);
                 }
             }

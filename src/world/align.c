@@ -12,18 +12,6 @@ g3d_align_params g3d_align_params_default(void)
     return p;
 }
 
-static int cmp_float(const void *a, const void *b)
-{
-    float x = *(const float *)a, y = *(const float *)b;
-    return (x > y) - (x < y);
-}
-
-static float median(float *v, size_t n)
-{
-    qsort(v, n, sizeof *v, cmp_float);
-    return n % 2 ? v[n / 2] : 0.5f * (v[n / 2 - 1] + v[n / 2]);
-}
-
 g3d_status g3d_align_depth(g3d_image *depth_new, const g3d_image *depth_cloud, const g3d_image *mask,
                            const g3d_align_params *p, g3d_align_stats *stats)
 {
@@ -63,10 +51,10 @@ g3d_status g3d_align_depth(g3d_image *depth_new, const g3d_image *depth_cloud, c
     g3d_status rc = G3D_OK;
     if (m > 0 && holes > 0) {
         st.residual_before = before / m;
-        float med = median(tmp, m);
+        float med = g3d_median_f32(tmp, m);
         for (size_t k = 0; k < m; k++) tmp[k] = fabsf(tmp[k] - med);
         /* In a fresh pass, since tmp was reordered by the median. */
-        float mad = median(tmp, m);
+        float mad = g3d_median_f32(tmp, m);
         float lim = p->outlier_mads * 1.4826f * mad + 1e-3f;
         double after = 0;
         for (size_t i = 0; i < n; i++) {

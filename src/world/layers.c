@@ -45,12 +45,6 @@ static double occluding_fraction(const uint8_t *mk, const g3d_image *depth)
     return boundary ? (double)occluding / boundary : 0.0;
 }
 
-static int cmp_float(const void *a, const void *b)
-{
-    float x = *(const float *)a, y = *(const float *)b;
-    return (x > y) - (x < y);
-}
-
 g3d_status g3d_layers_compute(const g3d_image *rgb, const g3d_image *depth, const g3d_mask_provider *masks,
                               const g3d_inpainter *inpaint, const g3d_depth_estimator *depth_fill,
                               const g3d_layers_params *p, uint64_t seed, g3d_layers *out)
@@ -68,7 +62,7 @@ g3d_status g3d_layers_compute(const g3d_image *rgb, const g3d_image *depth, cons
     size_t nv = 0;
     for (size_t i = 0; i < n; i++) if (depth->data[i] > 0) vals[nv++] = depth->data[i];
     if (nv == 0) { free(vals); free(inside); return G3D_ERR(G3D_ERR_ARG, "layers: depth has no valid pixel"); }
-    qsort(vals, nv, sizeof *vals, cmp_float);
+    g3d_sort_f32(vals, nv);
     out->theta_d = vals[(size_t)(p->percentile * (nv - 1))];
 
     g3d_mask_set set;
@@ -87,8 +81,7 @@ g3d_status g3d_layers_compute(const g3d_image *rgb, const g3d_image *depth, cons
         if (set.scores[m] <= p->min_score && set.scores[m] < 1.0f) continue;
         if (area < p->min_area * n || area > p->max_area * n || k == 0) continue;
         out->n_kept++;
-        qsort(inside, k, sizeof *inside, cmp_float);
-        float med = k % 2 ? inside[k / 2] : 0.5f * (inside[k / 2 - 1] + inside[k / 2]);
+        float med = g3d_median_f32(inside, k);
         double occ = occluding_fraction(mk, depth);
         g3d_log(G3D_LOG_DEBUG, "layers: candidate %d: area %.2f %%, median depth %.2f m, occluding boundary %.0f %%", m,
                 100.0 * area / n, med, 100 * occ);

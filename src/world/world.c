@@ -41,12 +41,6 @@ void g3d_world_free(g3d_world *w)
     memset(w, 0, sizeof *w);
 }
 
-static int cmp_float(const void *a, const void *b)
-{
-    float x = *(const float *)a, y = *(const float *)b;
-    return (x > y) - (x < y);
-}
-
 double g3d_depth_median(const g3d_image *depth)
 {
     size_t n = g3d_image_size(depth), k = 0;
@@ -54,7 +48,7 @@ double g3d_depth_median(const g3d_image *depth)
     if (!v) return 0;
     for (size_t i = 0; i < n; i++) if (depth->data[i] > 0) v[k++] = depth->data[i];
     double m = 0;
-    if (k) { qsort(v, k, sizeof *v, cmp_float); m = v[k / 2]; }
+    if (k) { g3d_sort_f32(v, k); m = v[k / 2]; }
     free(v);
     return m;
 }
