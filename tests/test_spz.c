@@ -86,6 +86,27 @@ TEST(layout_and_flip)
     g3d_gaussians_free(&g);
 }
 
+/* The in-memory encoding is the file, byte for byte. */
+TEST(encode_is_the_file)
+{
+    g3d_gaussians g;
+    random_model(&g, 150, 2);
+    const char *path = test_tmp("enc.spz");
+    CHECK_OK(g3d_spz_save(path, &g));
+    uint8_t *mem = NULL;
+    size_t n = 0, fn = 0;
+    unsigned char *file = NULL;
+    CHECK_OK(g3d_spz_encode(&g, "enc", &mem, &n));
+    CHECK_OK(g3d_read_file(path, 1 << 24, &file, &fn));
+    CHECK(mem && file && n == fn && !memcmp(mem, file, n));
+    free(mem);
+    free(file);
+    g.means[7] = 1e6f;  /* beyond the fixed-point range: refused, nothing returned */
+    CHECK_FAILS(g3d_spz_encode(&g, "enc", &mem, &n));
+    CHECK(mem == NULL && n == 0);
+    g3d_gaussians_free(&g);
+}
+
 TEST(bad_files)
 {
     g3d_gaussians g, d;
@@ -116,6 +137,7 @@ int main(void)
 {
     RUN(round_trip);
     RUN(layout_and_flip);
+    RUN(encode_is_the_file);
     RUN(bad_files);
     return test_summary();
 }

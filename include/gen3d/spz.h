@@ -41,6 +41,10 @@ extern "C" {
  * G3D_ERR_IO, G3D_ERR_NOMEM. */
 g3d_status g3d_spz_save(const char *path, const g3d_gaussians *g);
 
+/* The same file in memory: *data (malloc'd, caller frees) holds *size bytes. `label` names
+ * the scene in error messages. Errors as g3d_spz_save, less G3D_ERR_IO. */
+g3d_status g3d_spz_encode(const g3d_gaussians *g, const char *label, uint8_t **data, size_t *size);
+
 /* Reads a version-2 .spz (versions 1 and 3 give G3D_ERR_UNSUPPORTED).
  * `g` is created here (caller frees with g3d_gaussians_free) and left zeroed on failure.
  * Errors name the file: G3D_ERR_FORMAT (not gzip, bad magic, truncated, absurd count),

@@ -45,16 +45,18 @@ static size_t payload_size(size_t n, int deg)
     return 16 + n * (9 + 1 + 3 + 3 + 3 + 3 * (size_t)(G3D_SH_COEFFS(deg) - 1));
 }
 
-g3d_status g3d_spz_save(const char *path, const g3d_gaussians *g)
+g3d_status g3d_spz_encode(const g3d_gaussians *g, const char *label, uint8_t **data, size_t *size)
 {
+    *data = NULL;
+    *size = 0;
     const size_t n = (size_t)g->n;
     const int K = G3D_SH_COEFFS(g->sh_degree);
-    if (g->n > 0xffffffffLL) return G3D_ERR(G3D_ERR_ARG, "%s: too many Gaussians for .spz", path);
+    if (g->n > 0xffffffffLL) return G3D_ERR(G3D_ERR_ARG, "%s: too many Gaussians for .spz", label);
     const double lim = (double)(1 << 23) / (1 << SPZ_FRAC_BITS);
     for (size_t i = 0; i < n * 3; i++)
         if (!(fabs(g->means[i]) < lim))
             return G3D_ERR(G3D_ERR_ARG, "%s: Gaussian %zu lies beyond the .spz range of +-%g m",
-                           path, i / 3, lim);
+                           label, i / 3, lim);
     size_t raw_n = payload_size(n, g->sh_degree);
     uint8_t *raw = g3d_calloc(raw_n, 1, ".spz buffer");
     if (!raw) return G3D_ERR_NOMEM;
@@ -92,7 +94,7 @@ g3d_status g3d_spz_save(const char *path, const g3d_gaussians *g)
     memset(&zs, 0, sizeof zs);
     if (deflateInit2(&zs, 9, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) != Z_OK) {
         free(raw);
-        return G3D_ERR(G3D_ERR_NOMEM, "%s: zlib initialisation failed", path);
+        return G3D_ERR(G3D_ERR_NOMEM, "%s: zlib initialisation failed", label);
     }
     uLong cap = deflateBound(&zs, (uLong)raw_n);
     uint8_t *out = g3d_calloc(cap, 1, ".spz buffer");
@@ -104,14 +106,27 @@ g3d_status g3d_spz_save(const char *path, const g3d_gaussians *g)
         zs.avail_in = (uInt)raw_n;
         zs.next_out = out;
         zs.avail_out = (uInt)cap;
-        if (deflate(&zs, Z_FINISH) != Z_STREAM_END)
-            rc = G3D_ERR(G3D_ERR_INTERNAL, "%s: gzip compression failed", path);
-        else
-            rc = g3d_write_file_atomic(path, out, zs.total_out);
+        if (deflate(&zs, Z_FINISH) != Z_STREAM_END) {
+            rc = G3D_ERR(G3D_ERR_INTERNAL, "%s: gzip compression failed", label);
+        } else {
+            *data = out;
+            *size = zs.total_out;
+            out = NULL;
+        }
     }
     deflateEnd(&zs);
     free(out);
     free(raw);
+    return rc;
+}
+
+g3d_status g3d_spz_save(const char *path, const g3d_gaussians *g)
+{
+    uint8_t *data;
+    size_t n;
+    G3D_TRY(g3d_spz_encode(g, path, &data, &n));
+    g3d_status rc = g3d_write_file_atomic(path, data, n);
+    free(data);
     return rc;
 }
 
