@@ -1,15 +1,11 @@
 /* gen3d render: a Gaussian scene rendered along a camera path to frames, depth and a video. */
-#include "cli.h"
-#include "gen3d/cameras_json.h"
-#include "gen3d/ply.h"
+#include "scene_opts.h"
 #include "gen3d/render.h"
-#include "gen3d/spz.h"
 
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 
 static char g_description[4096];
 
@@ -53,46 +49,16 @@ static int parse_rgb(const char *s, float out[3])
     return *s == '\0';
 }
 
-static g3d_status load_scene(const char *path, g3d_gaussians *g)
-{
-    char ext[16];
-    g3d_path_ext(path, ext, sizeof ext);
-    struct stat st;
-    if (stat(path, &st) != 0) return G3D_ERR(G3D_ERR_IO, "%s: no such scene file", path);
-    if (!strcmp(ext, "ply")) return g3d_ply_read_gaussians(path, g);
-    if (!strcmp(ext, "spz")) return g3d_spz_load(path, g);
-    return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: unknown scene format '.%s' (expected .ply or .spz)", path, ext);
-}
-
-/* A trajectory argument names a file when it looks like a path or exists; else a preset. */
-static int is_file_arg(const char *s)
-{
-    char ext[16];
-    struct stat st;
-    return strchr(s, '/') || !strcmp(g3d_path_ext(s, ext, sizeof ext), "json") || stat(s, &st) == 0;
-}
-
+/* The cameras of a trajectory file, taken over from the list. */
 static g3d_status load_path_file(const char *path, g3d_camera **cams, int *n)
 {
     g3d_camera_list l;
-    G3D_TRY(g3d_camera_list_load(path, &l));
-    g3d_status rc = G3D_OK;
-    if (l.n < 1) rc = G3D_ERR(G3D_ERR_FORMAT, "%s: the camera list is empty", path);
-    for (int i = 0; i < l.n && rc == G3D_OK; i++) {
-        const g3d_intrinsics K = l.cams[i].K;
-        if (K.width < 1 || K.height < 1 || K.width > G3D_MAX_IMAGE_SIDE || K.height > G3D_MAX_IMAGE_SIDE)
-            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: frame %d: image size %dx%d out of range 1..%d", path, i, K.width,
-                         K.height, G3D_MAX_IMAGE_SIDE);
-        else if (!(K.fx > 0 && K.fy > 0))
-            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: frame %d: focal lengths must be positive", path, i);
-    }
-    if (rc == G3D_OK) {
-        *cams = l.cams;  /* taken over from the list */
-        *n = l.n;
-        l.cams = NULL;
-    }
+    G3D_TRY(g3d_cli_load_camera_file(path, &l));
+    *cams = l.cams;
+    *n = l.n;
+    l.cams = NULL;
     g3d_camera_list_free(&l);
-    return rc;
+    return G3D_OK;
 }
 
 static int run(int argc, char **argv)
@@ -143,7 +109,7 @@ static int run(int argc, char **argv)
     if (sh_degree < -1 || sh_degree > G3D_SH_MAX_DEGREE) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sh-degree must be in -1..3");
     if (!parse_rgb(background, bg))
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--background must be R,G,B with components in [0, 1], got '%s'", background);
-    const int from_file = is_file_arg(trajectory);
+    const int from_file = g3d_cli_is_file_arg(trajectory);
     if (from_file && frames > 0)
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--frames resamples presets; a trajectory file is rendered as given");
     g3d_cli_common_apply(&common);
@@ -152,7 +118,7 @@ static int run(int argc, char **argv)
     g3d_camera *cams = NULL;
     int n = 0;
     char *tmp = NULL;
-    g3d_status rc = load_scene(scene, &g);
+    g3d_status rc = g3d_cli_load_scene(scene, &g);
     if (rc == G3D_OK && sh_degree > g.sh_degree)
         rc = G3D_ERR(G3D_ERR_ARG, "%s: --sh-degree %d asked for, the scene has SH degree %d", scene, sh_degree, g.sh_degree);
     if (rc == G3D_OK && g.n == 0) rc = G3D_ERR(G3D_ERR_FORMAT, "%s: the scene holds no Gaussians", scene);

@@ -1,0 +1,23 @@
+/* scene_opts.h - the scene and camera-file arguments shared by the commands that read a
+ * trained scene (render, view). */
+#ifndef G3D_SCENE_OPTS_H
+#define G3D_SCENE_OPTS_H
+
+#include "cli.h"
+#include "gen3d/cameras_json.h"
+#include "gen3d/gaussians.h"
+
+/* Reads a scene by its extension: .ply (standard 3DGS layout) or .spz. *g is created (caller
+ * frees). Errors name the file: missing, unknown extension, and the readers' own. */
+g3d_status g3d_cli_load_scene(const char *path, g3d_gaussians *g);
+
+/* 1 when a trajectory argument names a file (it contains '/', ends in .json or exists),
+ * 0 when it is a preset name. */
+int g3d_cli_is_file_arg(const char *arg);
+
+/* Reads a camera file (cameras.json or transforms.json) that must hold at least one camera,
+ * each with a size in 1..G3D_MAX_IMAGE_SIDE and positive focal lengths. *l is created (caller
+ * frees with g3d_camera_list_free). */
+g3d_status g3d_cli_load_camera_file(const char *path, g3d_camera_list *l);
+
+#endif /* G3D_SCENE_OPTS_H */
