@@ -1,6 +1,9 @@
 #!/bin/sh
 # Installs everything gen3d needs to build, test and run, from Debian's archive.
 # Idempotent and non-interactive; run as root (or through sudo) on Debian 12.
+#   build and run:  compiler, CMake, libraries, ffmpeg (videos)
+#   the viewer:     node and npm (bundling web/ at build time; its packages come from the
+#                   npm registry through `npm ci`), chromium (the real-browser test)
 set -eu
 
 PKGS="build-essential cmake pkg-config libstb-dev libopenblas-dev libcjson-dev zlib1g-dev libfftw3-dev ffmpeg"
@@ -9,6 +12,11 @@ missing=""
 for p in $PKGS; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
 done
+# By command rather than by package: a node from elsewhere (whose own npm conflicts with
+# Debian's npm package) serves as well as Debian's.
+command -v node >/dev/null 2>&1 || missing="$missing nodejs"
+command -v npm >/dev/null 2>&1 || missing="$missing npm"
+command -v chromium >/dev/null 2>&1 || missing="$missing chromium"
 
 if [ -n "$missing" ]; then
     SUDO=""
