@@ -13,6 +13,9 @@ for f in scene.ply scene.spz video.mp4 preview.png cameras.json transforms.json 
     [ -s "$T/a/$f" ] && ok "wrote $f" || bad "wrote $f"
 done
 grep -q "train" "$T/out" && grep -q "PSNR" "$T/out" && grep -q "total" "$T/out" && ok "summary on stdout" || bad "summary on stdout"
+if [ -f "$(dirname "$GEN3D")/gen3d-viewer.html" ]; then  # the viewer was built
+    [ -s "$T/a/viewer.html" ] && grep -q '"viewer":[[:space:]]*true' "$T/a/summary.json" && ok "wrote viewer.html" || bad "wrote viewer.html"
+fi
 grep -q '"seed":' "$T/a/config.json" && grep -q '"iterations":' "$T/a/config.json" && ok "config records the settings" || bad "config records the settings"
 grep -q '"dataset/views/view_000.png"' "$T/a/transforms.json" && ok "cameras point into dataset/" || bad "cameras point into dataset/"
 expect 0 "the folder trains as a nerfstudio dataset" "$GEN3D" train --data "$T/a" --iters 5 --sh-degree 0 -q -o "$T/retrained"

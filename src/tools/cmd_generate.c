@@ -9,6 +9,7 @@
 #include "gen3d/render.h"
 #include "gen3d/spz.h"
 #include "gen3d/train.h"
+#include "gen3d/viewer.h"
 
 #include <cjson/cJSON.h>
 #include <stdint.h>
@@ -27,6 +28,7 @@ static const char *description(void)
                      "views' valid pixels (as `gen3d train`), then a fly-through video. Writes one folder:\n"
                      "  scene.ply        the trained Gaussians, standard 3DGS layout (any 3DGS viewer)\n"
                      "  scene.spz        the same, compressed (.spz version 2)\n"
+                     "  viewer.html      the scene in a web page to explore (when the viewer is built)\n"
                      "  video.mp4        a fly-through along --video-trajectory (PNG frames in frames/ when\n"
                      "                   ffmpeg is not installed); `gen3d render` renders other paths\n"
                      "  preview.png      the scene rendered from the input camera\n"
@@ -264,6 +266,10 @@ static int run(int argc, char **argv)
     g3d_render_result rr = {0};
     if (rc == G3D_OK) rc = write_preview(tmp, &g, &w.cams[0]);
     if (rc == G3D_OK && !o.no_video) rc = write_video(tmp, &g, &w.cams[0], &o, &rr);
+    int viewer = 0;
+    if (rc == G3D_OK)
+        rc = g3d_viewer_write_generated(tmp, &g, w.cams, w.n_views, o.no_video ? NULL : o.video_trajectory, o.frames,
+                                        o.fps, &viewer);
     t_render = g3d_time_now() - t;
 
     if (rc == G3D_OK) {
@@ -283,6 +289,7 @@ static int run(int argc, char **argv)
         cJSON_AddNumberToObject(sum, "seconds_world", t_world);
         cJSON_AddNumberToObject(sum, "seconds_train", t_train);
         cJSON_AddBoolToObject(sum, "video", rr.video_written);
+        cJSON_AddBoolToObject(sum, "viewer", viewer);
         if (rr.note) cJSON_AddStringToObject(sum, "video_note", rr.note);
         cJSON_AddNumberToObject(sum, "seconds_render", t_render);
         cJSON_AddNumberToObject(sum, "seconds_write", t_write);
