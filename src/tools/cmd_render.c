@@ -49,18 +49,6 @@ static int parse_rgb(const char *s, float out[3])
     return *s == '\0';
 }
 
-/* The cameras of a trajectory file, taken over from the list. */
-static g3d_status load_path_file(const char *path, g3d_camera **cams, int *n)
-{
-    g3d_camera_list l;
-    G3D_TRY(g3d_cli_load_camera_file(path, &l));
-    *cams = l.cams;
-    *n = l.n;
-    l.cams = NULL;
-    g3d_camera_list_free(&l);
-    return G3D_OK;
-}
-
 static int run(int argc, char **argv)
 {
     g3d_cli_common common;
@@ -124,7 +112,7 @@ static int run(int argc, char **argv)
     if (rc == G3D_OK && g.n == 0) rc = G3D_ERR(G3D_ERR_FORMAT, "%s: the scene holds no Gaussians", scene);
     if (rc == G3D_OK) {
         if (from_file) {
-            rc = load_path_file(trajectory, &cams, &n);
+            rc = g3d_cli_load_camera_path(trajectory, &cams, &n);
         } else {
             g3d_camera input;
             input.K = g3d_intrinsics_from_fov(fov, width, height);

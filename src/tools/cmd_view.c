@@ -65,14 +65,8 @@ static g3d_status video_cameras(const view_opts *o, const g3d_gaussians *g, cons
     *cams = NULL;
     *n = 0;
     if (!strcmp(o->video, "none")) return G3D_OK;
-    if (!g3d_cli_is_file_arg(o->video)) return g3d_render_flythrough(o->video, NULL, g, input, 0, o->frames, cams, n);
-    g3d_camera_list l;
-    G3D_TRY(g3d_cli_load_camera_file(o->video, &l));
-    *cams = l.cams;  /* taken over from the list */
-    *n = l.n;
-    l.cams = NULL;
-    g3d_camera_list_free(&l);
-    return G3D_OK;
+    if (g3d_cli_is_file_arg(o->video)) return g3d_cli_load_camera_path(o->video, cams, n);
+    return g3d_render_flythrough(o->video, NULL, g, input, 0, o->frames, cams, n);
 }
 
 static int run(int argc, char **argv)

@@ -42,3 +42,14 @@ g3d_status g3d_cli_load_camera_file(const char *path, g3d_camera_list *l)
     if (rc != G3D_OK) g3d_camera_list_free(l);
     return rc;
 }
+
+g3d_status g3d_cli_load_camera_path(const char *path, g3d_camera **cams, int *n)
+{
+    g3d_camera_list l;
+    G3D_TRY(g3d_cli_load_camera_file(path, &l));
+    *cams = l.cams;  /* taken over from the list */
+    *n = l.n;
+    l.cams = NULL;
+    g3d_camera_list_free(&l);
+    return G3D_OK;
+}

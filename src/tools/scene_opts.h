@@ -20,4 +20,7 @@ int g3d_cli_is_file_arg(const char *arg);
  * frees with g3d_camera_list_free). */
 g3d_status g3d_cli_load_camera_file(const char *path, g3d_camera_list *l);
 
+/* The same, the cameras only: *cams (malloc'd, caller frees) holds *n cameras. */
+g3d_status g3d_cli_load_camera_path(const char *path, g3d_camera **cams, int *n);
+
 #endif /* G3D_SCENE_OPTS_H */
