@@ -180,6 +180,16 @@ TEST(page_matches_render)
     g3d_camera_list_free(&l);
 
     CHECK(run("'%s' view '%s' --cameras '%s' -q -o '%s' > /dev/null", g_gen3d, ply, cams, page) == 0);
+    /* the page costs at most 1 MB more than the scene's .spz */
+    uint8_t *spz = NULL;
+    size_t spz_n = 0;
+    struct stat st;
+    CHECK_OK(g3d_spz_encode(&g_scene, "scene", &spz, &spz_n));
+    CHECK(stat(page, &st) == 0);
+    printf("       viewer.html %lld bytes for a %zu-byte .spz (+%lld)\n", (long long)st.st_size, spz_n,
+           (long long)st.st_size - (long long)spz_n);
+    CHECK(st.st_size - (long long)spz_n <= 1000000);
+    free(spz);
     g3d_remove_tree(render);
     CHECK(run("'%s' render --scene '%s' --trajectory '%s' --no-video -q -o '%s' > /dev/null", g_gen3d, ply, cams, render) == 0);
     cJSON *report = shoot(page, shot, NULL);
