@@ -300,15 +300,19 @@ static double psnr_files(const char *a, const char *b)
 }
 
 /* Key 1 plays the generation path and stops at its last camera; W flies; R comes back to
- * the input view. Each stop is checked against gen3d render of that camera. */
+ * the input view; a drag orbits and the wheel zooms. Each stop is checked against gen3d
+ * render of the camera it should be at, or shown to have left it. */
 TEST(paths_flight_and_reset)
 {
     const char *page = test_tmp("browser/viewer.html");
     char steps[4096];
-    snprintf(steps, sizeof steps, "press:Digit1;idle;shot:%s;hold:KeyW:700;shot:%s;press:KeyR;shot:%s",
-             test_tmp("browser/path_end.png"), test_tmp("browser/flown.png"), test_tmp("browser/reset.png"));
+    snprintf(steps, sizeof steps,
+             "press:Digit1;idle;shot:%s;hold:KeyW:700;shot:%s;press:KeyR;shot:%s;"
+             "drag:100,120,200,140;shot:%s;press:KeyR;wheel:160,120,-500;shot:%s",
+             test_tmp("browser/path_end.png"), test_tmp("browser/flown.png"), test_tmp("browser/reset.png"),
+             test_tmp("browser/orbited.png"), test_tmp("browser/zoomed.png"));
     cJSON *report = shoot(page, test_tmp("browser/unused.png"), steps);
-    CHECK(report && cJSON_GetObjectItem(report, "screenshots")->valuedouble == 3);
+    CHECK(report && cJSON_GetObjectItem(report, "screenshots")->valuedouble == 5);
     CHECK(report && console_errors(report) == 0);
     cJSON_Delete(report);
     double end = psnr_files(test_tmp("browser/path_end.png"), test_tmp("browser/render/frames/00001.png"));
@@ -319,6 +323,11 @@ TEST(paths_flight_and_reset)
     CHECK(end >= 25.0);
     CHECK(flown < 20.0);
     CHECK(reset >= 25.0);
+    double orbited = psnr_files(test_tmp("browser/orbited.png"), test_tmp("browser/render/frames/00000.png"));
+    double zoomed = psnr_files(test_tmp("browser/zoomed.png"), test_tmp("browser/render/frames/00000.png"));
+    printf("       after a drag: %.2f dB; after the wheel: %.2f dB\n", orbited, zoomed);
+    CHECK(orbited < 20.0);
+    CHECK(zoomed < 20.0);
 }
 
 /* A page whose scene bytes are damaged shows a sentence, not a blank page. */

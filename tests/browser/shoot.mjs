@@ -7,8 +7,8 @@
 //                  --width W --height H [--timeout SECONDS] [--steps STEPS]
 //
 // STEPS, separated by ';', replace the single screenshot: press:CODE (a key, by its
-// KeyboardEvent.code: KeyW, Digit1, ...), hold:CODE:MS, idle (until no camera path is
-// playing), shot:FILE.
+// KeyboardEvent.code: KeyW, Digit1, ...), hold:CODE:MS, drag:X0,Y0,X1,Y1 (left button, in
+// ten moves), wheel:X,Y,DELTA, idle (until no camera path is playing), shot:FILE.
 //
 // Prints one JSON line: {"state": window.g3d's ready/error/frames/gaussians, "console":
 // [{level, text}] (every console message, uncaught exception and browser log entry),
@@ -147,6 +147,18 @@ async function main() {
         await key(a, 'keyDown');
         await sleep(Number(b));
         await key(a, 'keyUp');
+      } else if (what === 'drag') {
+        const [x0, y0, x1, y1] = a.split(',').map(Number);
+        const mouse = (type, x, y) => s('Input.dispatchMouseEvent', { type, x, y, button: 'left', buttons: type === 'mouseReleased' ? 0 : 1, clickCount: 1 });
+        await mouse('mousePressed', x0, y0);
+        for (let k = 1; k <= 10; k++) {
+          await mouse('mouseMoved', x0 + ((x1 - x0) * k) / 10, y0 + ((y1 - y0) * k) / 10);
+          await sleep(30);
+        }
+        await mouse('mouseReleased', x1, y1);
+      } else if (what === 'wheel') {
+        const [x, y, delta] = a.split(',').map(Number);
+        await s('Input.dispatchMouseEvent', { type: 'mouseWheel', x, y, deltaX: 0, deltaY: delta });
       } else if (what === 'idle') {
         while (Date.now() - t0 < timeoutMs && (await evaluate('g3d.playing'))) await sleep(200);
       } else if (what === 'shot') {
