@@ -1,9 +1,7 @@
 /* gen3d render: a Gaussian scene rendered along a camera path to frames, depth and a video. */
 #include "cli.h"
 #include "gen3d/cameras_json.h"
-#include "gen3d/ply.h"
 #include "gen3d/render.h"
-#include "gen3d/spz.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -51,17 +49,6 @@ static int parse_rgb(const char *s, float out[3])
         }
     }
     return *s == '\0';
-}
-
-static g3d_status load_scene(const char *path, g3d_gaussians *g)
-{
-    char ext[16];
-    g3d_path_ext(path, ext, sizeof ext);
-    struct stat st;
-    if (stat(path, &st) != 0) return G3D_ERR(G3D_ERR_IO, "%s: no such scene file", path);
-    if (!strcmp(ext, "ply")) return g3d_ply_read_gaussians(path, g);
-    if (!strcmp(ext, "spz")) return g3d_spz_load(path, g);
-    return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: unknown scene format '.%s' (expected .ply or .spz)", path, ext);
 }
 
 /* A trajectory argument names a file when it looks like a path or exists; else a preset. */
@@ -152,10 +139,9 @@ static int run(int argc, char **argv)
     g3d_camera *cams = NULL;
     int n = 0;
     char *tmp = NULL;
-    g3d_status rc = load_scene(scene, &g);
+    g3d_status rc = g3d_gaussians_load(scene, &g);
     if (rc == G3D_OK && sh_degree > g.sh_degree)
         rc = G3D_ERR(G3D_ERR_ARG, "%s: --sh-degree %d asked for, the scene has SH degree %d", scene, sh_degree, g.sh_degree);
-    if (rc == G3D_OK && g.n == 0) rc = G3D_ERR(G3D_ERR_FORMAT, "%s: the scene holds no Gaussians", scene);
     if (rc == G3D_OK) {
         if (from_file) {
             rc = load_path_file(trajectory, &cams, &n);
