@@ -15,6 +15,13 @@ const char *g3d_covis_kind_name(g3d_covis_kind k)
     }
 }
 
+/* Whether (u, v) rounds (lround: halves away from zero) to a pixel of a w x h image; tested
+ * before rounding, so far-off projections never reach lround. */
+static int inside(double u, double v, int w, int h)
+{
+    return u > -0.5 && v > -0.5 && u < w - 0.5 && v < h - 0.5;
+}
+
 g3d_status g3d_eval_forward_warp(const g3d_camera *src, const g3d_image *rgb, const g3d_image *depth,
                                  const g3d_camera *dst, g3d_image *out_rgb, g3d_image *out_depth)
 {
@@ -36,10 +43,9 @@ g3d_status g3d_eval_forward_warp(const g3d_camera *src, const g3d_image *rgb, co
             const float d = *g3d_image_px(depth, x, y);
             if (!(d > 0)) continue;
             double u, v, zz;
-            if (!g3d_camera_project(dst, g3d_camera_unproject(src, x, y, d), &u, &v, &zz)) continue;
-            const long iu = lround(u), iv = lround(v);
-            if (iu < 0 || iv < 0 || iu >= w || iv >= h) continue;
-            const size_t k = (size_t)iv * w + (size_t)iu;
+            if (!g3d_camera_project(dst, g3d_camera_unproject(src, x, y, d), &u, &v, &zz) || !inside(u, v, w, h))
+                continue;
+            const size_t k = (size_t)lround(v) * w + (size_t)lround(u);
             if (!(zz < z[k])) continue;
             z[k] = (float)zz;
             if (out_rgb) memcpy(out_rgb->data + 3 * k, g3d_image_px(rgb, x, y), 3 * sizeof(float));
@@ -60,11 +66,10 @@ static g3d_status depth_test(const g3d_eval_view *in, const g3d_eval_view *view,
         for (int x = 0; x < w; x++) {
             const float d = *g3d_image_px(&view->depth, x, y);
             double u, v, z;
-            if (!(d > 0) || !g3d_camera_project(&in->cam, g3d_camera_unproject(&view->cam, x, y, d), &u, &v, &z))
+            if (!(d > 0) || !g3d_camera_project(&in->cam, g3d_camera_unproject(&view->cam, x, y, d), &u, &v, &z) ||
+                !inside(u, v, iw, ih))
                 continue;
-            const long iu = lround(u), iv = lround(v);
-            if (iu < 0 || iv < 0 || iu >= iw || ih <= iv) continue;
-            const float zi = *g3d_image_px(&in->depth, (int)iu, (int)iv);
+            const float zi = *g3d_image_px(&in->depth, (int)lround(u), (int)lround(v));
             mask->data[(size_t)y * w + x] = zi > 0 && z <= zi * (1.0 + G3D_EVAL_COVIS_DEPTH_TOL);
         }
     return G3D_OK;
