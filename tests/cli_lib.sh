@@ -1,6 +1,6 @@
 # Helpers shared by the CLI tests (sourced, not run): a scratch folder, pass/fail counting,
-# and `expect CODE NAME COMMAND...`, which runs COMMAND and checks its exit status, keeping
-# its stdout in $T/out and its stderr in $T/err.
+# `expect CODE NAME COMMAND...`, which runs COMMAND and checks its exit status, keeping
+# its stdout in $T/out and its stderr in $T/err; a small scene file and a PNG size reader.
 # Usage: T="$G3D_TEST_TMP/<name>"; . "$G3D_SOURCE_DIR/tests/cli_lib.sh"; ...; finish
 rm -rf "$T"; mkdir -p "$T"
 pass=0; fail=0
@@ -15,3 +15,27 @@ finish() {
     echo "$pass passed, $fail failed"
     [ "$fail" -eq 0 ]
 }
+# A small 3DGS scene as an ASCII PLY: a 10 x 8 wall of Gaussians 3 m ahead plus a row 2 m
+# ahead, colours varying across the grid (SH degree 0).
+scene_ply() {  # $1: file, $2: value replacing the first x (to inject a NaN), $3: extra f_rest count
+    awk -v bad="$2" -v nrest="$3" 'BEGIN {
+        n = 90
+        print "ply"; print "format ascii 1.0"; print "element vertex " n
+        split("x y z nx ny nz f_dc_0 f_dc_1 f_dc_2", names, " ")
+        for (i = 1; i <= 9; i++) print "property float " names[i]
+        for (i = 0; i < nrest; i++) print "property float f_rest_" i
+        print "property float opacity"
+        for (i = 0; i < 3; i++) print "property float scale_" i
+        for (i = 0; i < 4; i++) print "property float rot_" i
+        print "end_header"
+        for (k = 0; k < n; k++) {
+            if (k < 80) { x = (k % 10 - 4.5) * 0.35; y = (int(k / 10) - 3.5) * 0.3; z = 3.0 }
+            else { x = (k - 84.5) * 0.3; y = 0.4; z = 2.0 }
+            line = (k == 0 && bad != "" ? bad : x) " " y " " z " 0 0 0 " (k % 10) / 6 - 0.8 " " int(k / 10) / 5 - 0.8 " 0.5"
+            for (i = 0; i < nrest; i++) line = line " 0"
+            print line " 4 -1.6 -1.6 -1.6 1 0 0 0"
+        }
+    }' > "$1"
+}
+# Width and height of a PNG, from its IHDR chunk.
+png_size() { od -An -tu1 -j16 -N8 "$1" | awk '{ printf "%dx%d\n", $3 * 256 + $4, $7 * 256 + $8 }'; }

@@ -22,6 +22,7 @@ static void make_list(g3d_camera_list *l)
         snprintf(name, sizeof name, "images/view_%03d.png", i);
         g3d_camera_list_set_name(l, i, name);
         if (i == 3) g3d_camera_list_set_mask(l, i, "masks/view_003.png");
+        if (i == 1) g3d_camera_list_set_depth(l, i, "depth/view_001.npy");
     }
 }
 
@@ -36,6 +37,8 @@ static void check_same(const g3d_camera_list *a, const g3d_camera_list *b, doubl
         CHECK(a->cams[i].K.width == b->cams[i].K.width && a->cams[i].K.height == b->cams[i].K.height);
         CHECK(b->names[i] && !strcmp(a->names[i], b->names[i]));
         CHECK((a->mask_paths[i] == NULL) == (b->mask_paths[i] == NULL));
+        CHECK((a->depth_paths[i] == NULL) == (b->depth_paths[i] == NULL));
+        if (a->depth_paths[i] && b->depth_paths[i]) CHECK(!strcmp(a->depth_paths[i], b->depth_paths[i]));
     }
 }
 

@@ -5,30 +5,6 @@ set -u
 T="$G3D_TEST_TMP/cli_render"
 . "$G3D_SOURCE_DIR/tests/cli_lib.sh"
 
-# A small 3DGS scene as an ASCII PLY: a 10 x 8 wall of Gaussians 3 m ahead plus a row 2 m
-# ahead, colours varying across the grid (SH degree 0).
-scene_ply() {  # $1: file, $2: value replacing the first x (to inject a NaN), $3: extra f_rest count
-    awk -v bad="$2" -v nrest="$3" 'BEGIN {
-        n = 90
-        print "ply"; print "format ascii 1.0"; print "element vertex " n
-        split("x y z nx ny nz f_dc_0 f_dc_1 f_dc_2", names, " ")
-        for (i = 1; i <= 9; i++) print "property float " names[i]
-        for (i = 0; i < nrest; i++) print "property float f_rest_" i
-        print "property float opacity"
-        for (i = 0; i < 3; i++) print "property float scale_" i
-        for (i = 0; i < 4; i++) print "property float rot_" i
-        print "end_header"
-        for (k = 0; k < n; k++) {
-            if (k < 80) { x = (k % 10 - 4.5) * 0.35; y = (int(k / 10) - 3.5) * 0.3; z = 3.0 }
-            else { x = (k - 84.5) * 0.3; y = 0.4; z = 2.0 }
-            line = (k == 0 && bad != "" ? bad : x) " " y " " z " 0 0 0 " (k % 10) / 6 - 0.8 " " int(k / 10) / 5 - 0.8 " 0.5"
-            for (i = 0; i < nrest; i++) line = line " 0"
-            print line " 4 -1.6 -1.6 -1.6 1 0 0 0"
-        }
-    }' > "$1"
-}
-# Width and height of a PNG, from its IHDR chunk.
-png_size() { od -An -tu1 -j16 -N8 "$1" | awk '{ printf "%dx%d\n", $3 * 256 + $4, $7 * 256 + $8 }'; }
 count() { ls "$1" 2>/dev/null | wc -l | tr -d ' '; }
 
 scene_ply "$T/scene.ply" "" 0
@@ -86,6 +62,16 @@ expect 0 "no video" "$GEN3D" render --scene "$T/scene.ply" --trajectory swing --
 # compressed, so compare against the black-background render instead)
 expect 0 "black background" "$GEN3D" render --scene "$T/scene.ply" --trajectory swing --frames 3 --width 32 --height 24 --no-video -q -o "$T/e0"
 cmp -s "$T/e/frames/00001.png" "$T/e0/frames/00001.png" && bad "background changes the frames" || ok "background changes the frames"
+
+# WorldScore's benchmark path: 1 + 49 frames per move, 512x512, its camera_data.json
+expect 0 "worldscore path" "$GEN3D" render --scene "$T/scene.ply" --trajectory worldscore:orbit_left,push_in --distance 0.5 --no-video -q -o "$T/ws"
+[ "$(count "$T/ws/frames")" = 99 ] && ok "worldscore: 99 frames for two moves" || bad "worldscore: 99 frames for two moves ($(count "$T/ws/frames"))"
+[ "$(png_size "$T/ws/frames/00098.png")" = 512x512 ] && ok "worldscore: 512x512" || bad "worldscore: 512x512"
+tr -d ' \t\n' < "$T/ws/cameras.json" | grep -q '"fx":500,"fy":500,"cx":255.5,"cy":255.5' && ok "worldscore: focal 500" || bad "worldscore: focal 500"
+tr -d ' \t\n' < "$T/ws/camera_data.json" | grep -q '"focal_length":500,"scale":0.5' && ok "worldscore: camera_data.json" || bad "worldscore: camera_data.json"
+expect 2 "worldscore with --frames" "$GEN3D" render --scene "$T/scene.ply" --trajectory worldscore:push_in --frames 10 -o "$T/never"
+expect 1 "unknown worldscore move" "$GEN3D" render --scene "$T/scene.ply" --trajectory worldscore:push_in,spin -o "$T/never"
+grep -q "spin" "$T/err" && grep -q "pan_right" "$T/err" && ok "names the move and lists the known ones" || bad "names the move and lists the known ones"
 
 # refusals
 expect 2 "no scene" "$GEN3D" render -o "$T/never"

@@ -3,55 +3,33 @@
  * trained scene rendered at the real right camera, against the real right image, on the pixels
  * the left view also sees. The floor below is our regression bound: the figure reached when it
  * was set, less a margin for thread-count and platform differences. */
+#include "gen3d/eval.h"
 #include "gen3d/frame.h"
+#include "gen3d/loss.h"
 #include "gen3d/ply.h"
 #include "gen3d/raster.h"
 #include "testutil.h"
 
+#include <cjson/cJSON.h>
 #include <stdlib.h>
 #include <sys/wait.h>
 
 #define MAX_SIDE 256
 #define PSNR_FLOOR 25.0  /* 27.1 dB when set */
 
-/* Pixels of the right view that the left view's ground-truth depth reaches first (z-buffered
- * nearest-pixel forward warp): the co-visible region, where the right image is predictable. */
-static uint8_t *covisible(const g3d_frame *f, size_t *count)
+/* PSNR on the co-visible pixels of eval.json's first view, for `method` (NAN if absent). */
+static double eval_json_psnr(const char *path, const char *method)
 {
-    int w = f->heldout.w, h = f->heldout.h;
-    float *zbuf = malloc(sizeof(float) * (size_t)w * h);
-    uint8_t *m = calloc((size_t)w * h, 1);
-    for (size_t i = 0; i < (size_t)w * h; i++) zbuf[i] = INFINITY;
-    for (int y = 0; y < f->rgb.h; y++)
-        for (int x = 0; x < f->rgb.w; x++) {
-            float z = *g3d_image_px(&f->depth, x, y);
-            if (!(z > 0)) continue;
-            double u, v, zz;
-            if (!g3d_camera_project(&f->heldout_cam, g3d_camera_unproject(&f->cam, x, y, z), &u, &v, &zz)) continue;
-            int iu = (int)lround(u), iv = (int)lround(v);
-            if (iu < 0 || iv < 0 || iu >= w || iv >= h) continue;
-            size_t k = (size_t)iv * w + iu;
-            if (zz < zbuf[k]) zbuf[k] = (float)zz;
-        }
-    *count = 0;
-    for (size_t i = 0; i < (size_t)w * h; i++) *count += m[i] = isfinite(zbuf[i]);
-    free(zbuf);
-    return m;
-}
-
-static double masked_psnr(const g3d_image *a, const g3d_image *b, const uint8_t *m)
-{
-    double se = 0;
-    size_t n = 0;
-    for (size_t i = 0; i < (size_t)a->w * a->h; i++) {
-        if (!m[i]) continue;
-        for (int c = 0; c < 3; c++) {
-            double d = a->data[3 * i + c] - b->data[3 * i + c];
-            se += d * d;
-        }
-        n += 3;
-    }
-    return n ? 10 * log10(1.0 / (se / n + 1e-12)) : 0;
+    unsigned char *buf;
+    size_t n;
+    if (g3d_read_file(path, (size_t)1 << 24, &buf, &n) != G3D_OK) return NAN;
+    cJSON *root = cJSON_Parse((const char *)buf);
+    free(buf);
+    const cJSON *v = cJSON_GetArrayItem(cJSON_GetObjectItem(root, "per_view"), 0);
+    const cJSON *psnr = cJSON_GetObjectItem(cJSON_GetObjectItem(cJSON_GetObjectItem(v, method), "covisible"), "psnr");
+    double out = cJSON_IsNumber(psnr) ? psnr->valuedouble : NAN;
+    cJSON_Delete(root);
+    return out;
 }
 
 TEST(generate_at_the_real_right_view)
@@ -61,7 +39,7 @@ TEST(generate_at_the_real_right_view)
     const char *out = test_tmp("generate_middlebury");
     CHECK(gen3d != NULL);
     if (!gen3d) return;
-    char cmd[4096];
+    char cmd[16384];
     snprintf(cmd, sizeof cmd,
              "'%s' generate --default-input '%s' --max-side %d --steps 4 --extra 4 --iters 400 --sh-degree 1 "
              "--no-video -t 2 -q -o '%s' > '%s.log' 2>&1", gen3d, mb, MAX_SIDE, out, out);
@@ -77,8 +55,14 @@ TEST(generate_at_the_real_right_view)
     CHECK_OK(g3d_ply_read_gaussians(ply, &g));
     if (!f.heldout.data || !g.n) return;
 
-    size_t n_cov;
-    uint8_t *cov = covisible(&f, &n_cov);
+    /* the co-visible pixels: those the left view's ground-truth depth reaches (eval.h) */
+    g3d_eval_view left = {NULL, f.cam, f.rgb, f.depth, {0}}, right = {NULL, f.heldout_cam, f.heldout, {0}, {0}};
+    g3d_image cov;
+    g3d_covis_kind kind;
+    CHECK_OK(g3d_eval_covisible(&left, &right, &cov, &kind));
+    CHECK(kind == G3D_COVIS_INPUT_WARP);
+    size_t n_cov = 0;
+    for (size_t i = 0; i < g3d_image_size(&cov); i++) n_cov += cov.data[i] > 0.5f;
     g3d_image img;
     g3d_image_create(&img, f.heldout.w, f.heldout.h, 3);
     g3d_raster_ws *ws;
@@ -86,16 +70,31 @@ TEST(generate_at_the_real_right_view)
     g3d_raster_settings_default(&s);
     CHECK_OK(g3d_raster_ws_create(&ws));
     CHECK_OK(g3d_raster_fwd(ws, &g, &f.heldout_cam, &s, img.data, NULL, NULL, NULL));
-    double psnr = masked_psnr(&img, &f.heldout, cov);
+    double psnr = 0, still = 0;
+    CHECK_OK(g3d_psnr(&img, &f.heldout, &cov, &psnr));
     /* the left image itself, shown as if it were the right one: what ignoring parallax gives */
-    double still = masked_psnr(&f.rgb, &f.heldout, cov);
+    CHECK_OK(g3d_psnr(&f.rgb, &f.heldout, &cov, &still));
     printf("       Middlebury right view, %dx%d, %.0f%% co-visible: generate %.2f dB (left image as is: %.2f dB)\n",
            img.w, img.h, 100.0 * n_cov / ((double)img.w * img.h), psnr, still);
     CHECK(psnr >= PSNR_FLOOR);
     CHECK(psnr > still + 2.0);
+
+    /* gen3d eval on the same scene and views gives the same figures (its renders are rounded to
+     * 8 bits, as saved frames) */
+    snprintf(cmd, sizeof cmd, "'%s' eval --scene '%s' --views '%s' --max-side %d -q -o '%s/eval' > '%s.eval.log' 2>&1",
+             gen3d, ply, mb, MAX_SIDE, out, out);
+    st = system(cmd);
+    CHECK(st != -1 && WIFEXITED(st) && WEXITSTATUS(st) == 0);
+    char json[4096];
+    snprintf(json, sizeof json, "%s/eval/eval.json", out);
+    double e_scene = eval_json_psnr(json, "scene"), e_still = eval_json_psnr(json, "input_image");
+    printf("       gen3d eval: scene %.2f dB, input image %.2f dB (differences %.3f, %.3f dB)\n", e_scene, e_still,
+           e_scene - psnr, e_still - still);
+    CHECK(fabs(e_scene - psnr) < 0.1);
+    CHECK(fabs(e_still - still) < 0.1);
     g3d_raster_ws_free(ws);
     g3d_image_free(&img);
-    free(cov);
+    g3d_image_free(&cov);
     g3d_gaussians_free(&g);
     g3d_frame_free(&f);
 }

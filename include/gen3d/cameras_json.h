@@ -5,12 +5,15 @@
  *   {"version": 1, "convention": "opencv_c2w",
  *    "frames": [{"name": "view_000", "file_path": "images/view_000.png",   (optional)
  *                "mask_path": "masks/view_000.png",                        (optional)
+ *                "depth_path": "depth/view_000.npy",                       (optional)
  *                "fx": .., "fy": .., "cx": .., "cy": .., "width": .., "height": ..,
  *                "c2w": [[r00, r01, r02, tx], [..], [..], [0, 0, 0, 1]]}]}
  *
  * transforms.json (nerfstudio): camera_model "PINHOLE"/"OPENCV" (distortion must be zero),
  *   fl_x, fl_y, cx, cy, w, h at the top level and/or per frame (per-frame values win),
- *   frames[].file_path, frames[].mask_path (optional), frames[].transform_matrix =
+ *   frames[].file_path, frames[].mask_path and frames[].depth_file_path (optional; a
+ *   16-bit PNG in millimetres, nerfstudio's default unit, or float metres in .npy/.pfm),
+ *   frames[].transform_matrix =
  *   camera-to-world with OpenGL camera axes (x right, y up, z backward). nerfstudio puts
  *   pixel centres at i + 0.5, so cx_nerfstudio = cx_ours + 0.5 (and likewise cy).
  *   Poses are converted with g3d_pose_opencv_to_opengl; the world frame is kept as it is.
@@ -32,19 +35,22 @@ typedef struct g3d_camera_list {
     g3d_camera *cams;    /* (n) */
     char **names;        /* (n) frame names / file paths, may hold NULLs */
     char **mask_paths;   /* (n) optional mask paths, may hold NULLs */
+    char **depth_paths;  /* (n) optional ground-truth depth paths, may hold NULLs */
 } g3d_camera_list;
 
 /* Allocates n cameras with NULL names. */
 g3d_status g3d_camera_list_create(g3d_camera_list *l, int n);
 void g3d_camera_list_free(g3d_camera_list *l);
-/* Sets entry i's name / mask path (copied; NULL clears). */
+/* Sets entry i's name / mask path / depth path (copied; NULL clears). */
 g3d_status g3d_camera_list_set_name(g3d_camera_list *l, int i, const char *name);
 g3d_status g3d_camera_list_set_mask(g3d_camera_list *l, int i, const char *mask_path);
+g3d_status g3d_camera_list_set_depth(g3d_camera_list *l, int i, const char *depth_path);
 
 g3d_status g3d_cameras_json_write(const char *path, const g3d_camera_list *l);
 g3d_status g3d_cameras_json_read(const char *path, g3d_camera_list *l);
 
-/* nerfstudio transforms.json. Names become file_path; mask paths become mask_path. */
+/* nerfstudio transforms.json. Names become file_path; mask and depth paths become mask_path
+ * and depth_file_path. */
 g3d_status g3d_transforms_json_write(const char *path, const g3d_camera_list *l);
 g3d_status g3d_transforms_json_read(const char *path, g3d_camera_list *l);
 

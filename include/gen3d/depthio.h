@@ -42,6 +42,9 @@ g3d_status g3d_npy_save(const char *path, const float *data, int ndim, const int
 /* Loads a depth map by file extension (.png .pfm .npy .npz); `scale` divides the stored
  * values of 16-bit PNG and uint16 NPY (pass 0 for the default of 1000, i.e. millimetres). */
 g3d_status g3d_depth_load(const char *path, double scale, g3d_image *depth);
+/* The same without the cleaning: NaN, infinite, zero and negative values are kept as stored,
+ * for callers that must tell a missing value from a corrupt one (ground truth). */
+g3d_status g3d_depth_load_raw(const char *path, double scale, g3d_image *depth);
 /* Raw float map (PFM) without the invalid-value cleaning, e.g. a disparity map where inf
  * marks missing values; NaN/inf are kept. */
 g3d_status g3d_pfm_load(const char *path, g3d_image *img);

@@ -54,6 +54,10 @@ void g3d_gaussians_copy_one(g3d_gaussians *dst, int64_t i, const g3d_gaussians *
 int64_t g3d_gaussians_compact(g3d_gaussians *g, const uint8_t *keep);
 /* Checks every value is finite; G3D_ERR_FORMAT naming the first bad Gaussian otherwise. */
 g3d_status g3d_gaussians_validate(const g3d_gaussians *g, const char *label);
+/* Reads a scene file chosen by extension: .ply (standard 3DGS layout) or .spz. *g is created
+ * by the call. Errors name the file: missing, unknown extension, the readers' own, and a scene
+ * with no Gaussians (G3D_ERR_FORMAT). */
+g3d_status g3d_gaussians_load(const char *path, g3d_gaussians *g);
 
 #ifdef __cplusplus
 }

@@ -1,4 +1,5 @@
-/* gen3d/loss.h - the photometric training loss of 3D Gaussian splatting, and PSNR.
+/* gen3d/loss.h - the photometric training loss of 3D Gaussian splatting, PSNR, and the
+ * evaluation SSIM.
  *
  *   L = (1 - lambda) * L1 + lambda * (1 - SSIM)
  *
@@ -42,6 +43,17 @@ g3d_status g3d_loss_fwd_bwd(const g3d_image *pred, const g3d_image *target,
  * +infinity. Same failure cases as g3d_loss_fwd_bwd. */
 g3d_status g3d_psnr(const g3d_image *pred, const g3d_image *target, const g3d_image *mask,
                     double *psnr);
+
+/* SSIM as image-quality evaluations report it (Wang et al. 2004; scikit-image's
+ * structural_similarity with gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
+ * data_range=1, and pytorch-msssim's ssim with data_range=1 compute the same number): per
+ * channel, 11x11 Gaussian window with sigma 1.5, population statistics, C1 = 0.01^2,
+ * C2 = 0.03^2; the SSIM map is averaged over the pixels whose whole window lies inside the
+ * image (a 5-pixel border is left out) and, with a mask, whose mask value is > 0.5; then over
+ * the channels. Unlike the training loss above, the border never enters.
+ * Errors: as g3d_psnr, and G3D_ERR_ARG for images under 11x11 or a mask with no valid pixel
+ * inside the border. Thread-safe. */
+g3d_status g3d_ssim(const g3d_image *a, const g3d_image *b, const g3d_image *mask, double *ssim);
 
 #ifdef __cplusplus
 }

@@ -50,7 +50,8 @@ g3d_status g3d_render_path(const g3d_gaussians *g, const g3d_camera *cams, int n
 typedef struct g3d_render_output {
     int frames;       /* frames/00000.png, ... (8-bit RGB); default 1 */
     int video;        /* video.mp4 (needs ffmpeg and one size for all cameras); default 1 */
-    int cameras;      /* cameras.json: the path, names pointing at the frames; default 1 */
+    int cameras;      /* cameras.json: the path, names pointing at the frames (and depth
+                         frames); default 1 */
     g3d_video_params video_params;
 } g3d_render_output;
 

@@ -1,6 +1,8 @@
 /* cameras.json and transforms.json through cJSON. */
 #include "gen3d/cameras_json.h"
 
+#include "io/json_int.h"
+
 #include <cjson/cJSON.h>
 #include <math.h>
 #include <stdlib.h>
@@ -15,7 +17,8 @@ g3d_status g3d_camera_list_create(g3d_camera_list *l, int n)
     l->cams = g3d_calloc((size_t)(n ? n : 1), sizeof *l->cams, "cameras");
     l->names = g3d_calloc((size_t)(n ? n : 1), sizeof *l->names, "cameras");
     l->mask_paths = g3d_calloc((size_t)(n ? n : 1), sizeof *l->mask_paths, "cameras");
-    if (!l->cams || !l->names || !l->mask_paths) { g3d_camera_list_free(l); return G3D_ERR_NOMEM; }
+    l->depth_paths = g3d_calloc((size_t)(n ? n : 1), sizeof *l->depth_paths, "cameras");
+    if (!l->cams || !l->names || !l->mask_paths || !l->depth_paths) { g3d_camera_list_free(l); return G3D_ERR_NOMEM; }
     l->n = n;
     return G3D_OK;
 }
@@ -26,10 +29,12 @@ void g3d_camera_list_free(g3d_camera_list *l)
     for (int i = 0; i < l->n; i++) {
         if (l->names) free(l->names[i]);
         if (l->mask_paths) free(l->mask_paths[i]);
+        if (l->depth_paths) free(l->depth_paths[i]);
     }
     free(l->cams);
     free(l->names);
     free(l->mask_paths);
+    free(l->depth_paths);
     memset(l, 0, sizeof *l);
 }
 
@@ -47,6 +52,7 @@ static g3d_status set_str(char **slot, const char *s)
 
 g3d_status g3d_camera_list_set_name(g3d_camera_list *l, int i, const char *name) { return set_str(&l->names[i], name); }
 g3d_status g3d_camera_list_set_mask(g3d_camera_list *l, int i, const char *m) { return set_str(&l->mask_paths[i], m); }
+g3d_status g3d_camera_list_set_depth(g3d_camera_list *l, int i, const char *d) { return set_str(&l->depth_paths[i], d); }
 
 /* ---- shared helpers ----------------------------------------------------------------------- */
 
@@ -126,7 +132,7 @@ static cJSON *matrix_json(g3d_mat4 m)
     return rows;
 }
 
-static g3d_status save_json(const char *path, cJSON *root)
+g3d_status g3d_json_save(const char *path, cJSON *root)
 {
     char *text = cJSON_Print(root);
     cJSON_Delete(root);
@@ -161,6 +167,7 @@ g3d_status g3d_cameras_json_write(const char *path, const g3d_camera_list *l)
         cJSON *f = cJSON_CreateObject();
         if (l->names[i]) cJSON_AddStringToObject(f, "name", l->names[i]);
         if (l->mask_paths[i]) cJSON_AddStringToObject(f, "mask_path", l->mask_paths[i]);
+        if (l->depth_paths[i]) cJSON_AddStringToObject(f, "depth_path", l->depth_paths[i]);
         cJSON_AddNumberToObject(f, "fx", c->K.fx);
         cJSON_AddNumberToObject(f, "fy", c->K.fy);
         cJSON_AddNumberToObject(f, "cx", c->K.cx);
@@ -171,7 +178,7 @@ g3d_status g3d_cameras_json_write(const char *path, const g3d_camera_list *l)
         cJSON_AddItemToArray(frames, f);
     }
     cJSON_AddItemToObject(root, "frames", frames);
-    return save_json(path, root);
+    return g3d_json_save(path, root);
 }
 
 g3d_status g3d_cameras_json_read(const char *path, g3d_camera_list *l)
@@ -200,7 +207,9 @@ g3d_status g3d_cameras_json_read(const char *path, g3d_camera_list *l)
         c->K.height = (int)h;
         const char *name = get_str(f, "name");
         if (!name) name = get_str(f, "file_path");
-        if ((rc = g3d_camera_list_set_name(l, i, name)) || (rc = g3d_camera_list_set_mask(l, i, get_str(f, "mask_path")))) break;
+        if ((rc = g3d_camera_list_set_name(l, i, name)) || (rc = g3d_camera_list_set_mask(l, i, get_str(f, "mask_path"))) ||
+            (rc = g3d_camera_list_set_depth(l, i, get_str(f, "depth_path"))))
+            break;
     }
     cJSON_Delete(root);
     if (rc != G3D_OK) g3d_camera_list_free(l);
@@ -237,12 +246,13 @@ g3d_status g3d_transforms_json_write(const char *path, const g3d_camera_list *l)
         snprintf(fallback, sizeof fallback, "frame_%05d", i);
         cJSON_AddStringToObject(f, "file_path", l->names[i] ? l->names[i] : fallback);
         if (l->mask_paths[i]) cJSON_AddStringToObject(f, "mask_path", l->mask_paths[i]);
+        if (l->depth_paths[i]) cJSON_AddStringToObject(f, "depth_file_path", l->depth_paths[i]);
         if (memcmp(&c->K, K0, sizeof *K0) != 0) add_ns_intrinsics(f, &c->K);
         cJSON_AddItemToObject(f, "transform_matrix", matrix_json(g3d_pose_opencv_to_opengl(c->c2w)));
         cJSON_AddItemToArray(frames, f);
     }
     cJSON_AddItemToObject(root, "frames", frames);
-    return save_json(path, root);
+    return g3d_json_save(path, root);
 }
 
 g3d_status g3d_transforms_json_read(const char *path, g3d_camera_list *l)
@@ -286,7 +296,8 @@ g3d_status g3d_transforms_json_read(const char *path, g3d_camera_list *l)
         if ((rc = get_matrix(f, "transform_matrix", &gl, path, i))) break;
         c->c2w = g3d_pose_opengl_to_opencv(gl);
         if ((rc = g3d_camera_list_set_name(l, i, get_str(f, "file_path"))) ||
-            (rc = g3d_camera_list_set_mask(l, i, get_str(f, "mask_path"))))
+            (rc = g3d_camera_list_set_mask(l, i, get_str(f, "mask_path"))) ||
+            (rc = g3d_camera_list_set_depth(l, i, get_str(f, "depth_file_path"))))
             break;
     }
     cJSON_Delete(root);

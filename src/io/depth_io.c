@@ -101,7 +101,7 @@ static g3d_status array_to_depth(const char *path, g3d_array *a, double scale, i
     return G3D_OK;
 }
 
-g3d_status g3d_depth_load(const char *path, double scale, g3d_image *depth)
+g3d_status g3d_depth_load_raw(const char *path, double scale, g3d_image *depth)
 {
     char ext[16];
     g3d_status rc;
@@ -127,6 +127,12 @@ g3d_status g3d_depth_load(const char *path, double scale, g3d_image *depth)
     } else {
         return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: unknown depth format '.%s' (use .png, .pfm, .npy or .npz)", path, ext);
     }
+    return G3D_OK;
+}
+
+g3d_status g3d_depth_load(const char *path, double scale, g3d_image *depth)
+{
+    G3D_TRY(g3d_depth_load_raw(path, scale, depth));
     g3d_depth_sanitize(depth);
     return G3D_OK;
 }

@@ -1,4 +1,5 @@
-/* loss.c - masked L1 + SSIM loss with its analytic gradient, and masked PSNR. */
+/* loss.c - masked L1 + SSIM loss with its analytic gradient, masked PSNR, and the evaluation
+ * SSIM. */
 #include "gen3d/loss.h"
 
 #include <math.h>
@@ -51,6 +52,22 @@ static void blur(const double *in, double *out, double *tmp, int w, int h, const
     }
 }
 
+/* The windowed moments of one channel pair: means, second moments and the cross moment.
+ * sq and tmp are w*h scratch planes. */
+static void moments(const double *p, const double *t, double *mu1, double *mu2, double *e11, double *e22,
+                    double *e12, double *sq, double *tmp, int w, int h, const double k[WIN])
+{
+    const size_t np = (size_t)w * h;
+    blur(p, mu1, tmp, w, h, k);
+    blur(t, mu2, tmp, w, h, k);
+    for (size_t i = 0; i < np; i++) sq[i] = p[i] * p[i];
+    blur(sq, e11, tmp, w, h, k);
+    for (size_t i = 0; i < np; i++) sq[i] = t[i] * t[i];
+    blur(sq, e22, tmp, w, h, k);
+    for (size_t i = 0; i < np; i++) sq[i] = p[i] * t[i];
+    blur(sq, e12, tmp, w, h, k);
+}
+
 static g3d_status check_inputs(const g3d_image *pred, const g3d_image *target,
                                const g3d_image *mask, int64_t *nvalid)
 {
@@ -75,6 +92,17 @@ static g3d_status check_inputs(const g3d_image *pred, const g3d_image *target,
 }
 
 static int valid(const g3d_image *mask, size_t i) { return !mask || mask->data[i] > 0.5f; }
+
+/* The SSIM terms at one pixel from the blurred moments: ssim = A * B / (C * D). */
+static inline void ssim_terms(double m1, double m2, double e11, double e22, double e12, double *A, double *B,
+                              double *C, double *D)
+{
+    double s11 = e11 - m1 * m1, s22 = e22 - m2 * m2, s12 = e12 - m1 * m2;
+    *A = 2 * m1 * m2 + SSIM_C1;
+    *B = 2 * s12 + SSIM_C2;
+    *C = m1 * m1 + m2 * m2 + SSIM_C1;
+    *D = s11 + s22 + SSIM_C2;
+}
 
 g3d_status g3d_loss_fwd_bwd(const g3d_image *pred, const g3d_image *target,
                             const g3d_image *mask, double lambda, double *loss, double *ssim,
@@ -117,23 +145,14 @@ g3d_status g3d_loss_fwd_bwd(const g3d_image *pred, const g3d_image *target,
             }
             row_l1[y] += l1;
         }
-        blur(p, mu1, tmp, w, h, k);
-        blur(t, mu2, tmp, w, h, k);
-        for (size_t i = 0; i < np; i++) wa[i] = p[i] * p[i];
-        blur(wa, e11, tmp, w, h, k);
-        for (size_t i = 0; i < np; i++) wa[i] = t[i] * t[i];
-        blur(wa, e22, tmp, w, h, k);
-        for (size_t i = 0; i < np; i++) wa[i] = p[i] * t[i];
-        blur(wa, e12, tmp, w, h, k);
+        moments(p, t, mu1, mu2, e11, e22, e12, wa, tmp, w, h, k);
 
 #pragma omp parallel for schedule(static)
         for (int y = 0; y < h; y++) {
             double ssim_sum = 0;
             for (size_t i = (size_t)y * w; i < (size_t)(y + 1) * w; i++) {
-                double m1 = mu1[i], m2 = mu2[i];
-                double s11 = e11[i] - m1 * m1, s22 = e22[i] - m2 * m2, s12 = e12[i] - m1 * m2;
-                double A = 2 * m1 * m2 + SSIM_C1, B = 2 * s12 + SSIM_C2;
-                double C = m1 * m1 + m2 * m2 + SSIM_C1, D = s11 + s22 + SSIM_C2;
+                double m1 = mu1[i], m2 = mu2[i], A, B, C, D;
+                ssim_terms(m1, m2, e11[i], e22[i], e12[i], &A, &B, &C, &D);
                 double s = A * B / (C * D);
                 if (valid(mask, i)) {
                     ssim_sum += s;
@@ -194,5 +213,56 @@ g3d_status g3d_psnr(const g3d_image *pred, const g3d_image *target, const g3d_im
     }
     double mse = se / ((double)nvalid * c);
     *psnr = mse > 0 ? 10.0 * log10(1.0 / mse) : INFINITY;
+    return G3D_OK;
+}
+
+g3d_status g3d_ssim(const g3d_image *a, const g3d_image *b, const g3d_image *mask, double *ssim)
+{
+    int64_t nvalid;
+    G3D_TRY(check_inputs(a, b, mask, &nvalid));
+    const int w = a->w, h = a->h, c = a->c;
+    if (w < WIN || h < WIN)
+        return G3D_ERR(G3D_ERR_ARG, "ssim: a %dx%d image is smaller than the %dx%d window", w, h, WIN, WIN);
+    const size_t np = (size_t)w * h;
+    double *buf = g3d_calloc(np, 9 * sizeof(double), "ssim scratch");
+    double *rows = g3d_calloc((size_t)h, sizeof(double), "ssim row sums");
+    if (!buf || !rows) {
+        free(buf);
+        free(rows);
+        return G3D_ERR_NOMEM;
+    }
+    double *p = buf, *t = p + np, *mu1 = t + np, *mu2 = mu1 + np, *e11 = mu2 + np, *e22 = e11 + np,
+           *e12 = e22 + np, *sq = e12 + np, *tmp = sq + np;
+    double k[WIN];
+    gauss_window(k);
+    /* Only pixels whose whole window lies inside the image are averaged; there the zero padding
+     * of blur() never enters, so this is the 'valid' convolution of the usual definition. */
+    int64_t count = 0;
+    for (int y = HALF; y < h - HALF; y++)
+        for (int x = HALF; x < w - HALF; x++) count += valid(mask, (size_t)y * w + x);
+    for (int ch = 0; ch < c && count > 0; ch++) {
+        for (size_t i = 0; i < np; i++) {
+            p[i] = a->data[i * c + ch];
+            t[i] = b->data[i * c + ch];
+        }
+        moments(p, t, mu1, mu2, e11, e22, e12, sq, tmp, w, h, k);
+#pragma omp parallel for schedule(static)
+        for (int y = HALF; y < h - HALF; y++) {
+            double sum = 0;
+            for (size_t i = (size_t)y * w + HALF; i < (size_t)y * w + (w - HALF); i++) {
+                if (!valid(mask, i)) continue;
+                double A, B, C, D;
+                ssim_terms(mu1[i], mu2[i], e11[i], e22[i], e12[i], &A, &B, &C, &D);
+                sum += A * B / (C * D);
+            }
+            rows[y] += sum;
+        }
+    }
+    double total = 0;
+    for (int y = 0; y < h; y++) total += rows[y];
+    free(buf);
+    free(rows);
+    if (count == 0) return G3D_ERR(G3D_ERR_ARG, "ssim: no valid pixel lies %d pixels inside the image border", HALF);
+    *ssim = total / ((double)count * c);
     return G3D_OK;
 }

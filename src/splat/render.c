@@ -128,7 +128,7 @@ static g3d_status make_subdir(const char *dir, const char *sub)
     return rc;
 }
 
-static g3d_status write_cameras(const char *dir, const g3d_camera *cams, int n)
+static g3d_status write_cameras(const char *dir, const g3d_camera *cams, int n, int depth)
 {
     g3d_camera_list l;
     G3D_TRY(g3d_camera_list_create(&l, n));
@@ -138,6 +138,8 @@ static g3d_status write_cameras(const char *dir, const g3d_camera *cams, int n)
         l.cams[i] = cams[i];
         snprintf(name, sizeof name, "frames/%05d.png", i);
         rc = g3d_camera_list_set_name(&l, i, name);
+        snprintf(name, sizeof name, "depth/%05d.png", i);
+        if (rc == G3D_OK && depth) rc = g3d_camera_list_set_depth(&l, i, name);
     }
     char *path = g3d_path_join(dir, "cameras.json");
     if (rc == G3D_OK) rc = path ? g3d_cameras_json_write(path, &l) : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
@@ -189,7 +191,7 @@ g3d_status g3d_render_to_dir(const g3d_gaussians *g, const g3d_camera *cams, int
             g3d_video_abort(w.video);
         }
     }
-    if (rc == G3D_OK && o->cameras) rc = write_cameras(dir, cams, n);
+    if (rc == G3D_OK && o->cameras) rc = write_cameras(dir, cams, n, w.depth);
     r.frames_written = rc == G3D_OK && w.frames;
     if (res) *res = r;
     return rc;

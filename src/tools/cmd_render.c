@@ -1,6 +1,7 @@
 /* gen3d render: a Gaussian scene rendered along a camera path to frames, depth and a video. */
 #include "scene_opts.h"
 #include "gen3d/render.h"
+#include "gen3d/worldscore.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -29,6 +30,12 @@ static const char *description(void)
     for (const char *const *n = g3d_trajectory_names(); *n && k > 0 && k < (int)sizeof g_description; n++)
         k += snprintf(g_description + k, sizeof g_description - (size_t)k, "  %-12s %s\n", *n,
                       g3d_trajectory_describe(*n));
+    if (k > 0 && k < (int)sizeof g_description)
+        snprintf(g_description + k, sizeof g_description - (size_t)k,
+                 "Benchmark paths:\n"
+                 "  worldscore:MOVE[,MOVE...]  WorldScore's static-track path: the WorldScore moves above chained,\n"
+                 "               1 + 49 frames per move at 512x512 with focal 500, camera speed --distance (0: a\n"
+                 "               quarter of the scene scale); also writes WorldScore's camera_data.json\n");
     return g_description;
 }
 
@@ -56,11 +63,11 @@ static int run(int argc, char **argv)
     common.output = "render";
     const char *scene = NULL, *trajectory = "swing", *background = "0,0,0";
     int width = 512, height = 384, fps = 30, crf = 18, frames = 0, depth = 0, no_video = 0, sh_degree = -1;
-    double fov = 60.0, scale = 0.0;
+    double fov = 60.0, scale = 0.0, ws_speed = 0.0;
     g3d_trajectory_params tp = g3d_trajectory_params_default();
     g3d_opt opts[] = {
         {0, "scene", G3D_OPT_STRING, &scene, "FILE", "scene to render (.ply 3DGS layout or .spz)"},
-        {0, "trajectory", G3D_OPT_STRING, &trajectory, "NAME|FILE", "preset name, or transforms.json / cameras.json"},
+        {0, "trajectory", G3D_OPT_STRING, &trajectory, "NAME|FILE", "preset name, worldscore:MOVE[,MOVE...], or transforms.json / cameras.json"},
         {0, "width", G3D_OPT_INT, &width, "W", "image width for presets, pixels"},
         {0, "height", G3D_OPT_INT, &height, "H", "image height for presets, pixels"},
         {0, "fov", G3D_OPT_DOUBLE, &fov, "DEG", "horizontal field of view for presets, degrees"},
@@ -97,22 +104,30 @@ static int run(int argc, char **argv)
     if (sh_degree < -1 || sh_degree > G3D_SH_MAX_DEGREE) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sh-degree must be in -1..3");
     if (!parse_rgb(background, bg))
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--background must be R,G,B with components in [0, 1], got '%s'", background);
-    const int from_file = g3d_cli_is_file_arg(trajectory);
+    const int worldscore = !strncmp(trajectory, "worldscore:", 11);
+    const int from_file = !worldscore && g3d_cli_is_file_arg(trajectory);
     if (from_file && frames > 0)
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--frames resamples presets; a trajectory file is rendered as given");
+    if (worldscore && (frames > 0 || width != 512 || height != 384 || fov != 60.0))
+        return g3d_cli_errorf(G3D_EXIT_USAGE, "a worldscore: path has the benchmark's frame count and 512x512 camera "
+                                              "with focal 500; --frames, --width, --height and --fov do not apply");
     g3d_cli_common_apply(&common);
 
     g3d_gaussians g = {0};
     g3d_camera *cams = NULL;
     int n = 0;
     char *tmp = NULL;
-    g3d_status rc = g3d_cli_load_scene(scene, &g);
+    g3d_status rc = g3d_gaussians_load(scene, &g);
     if (rc == G3D_OK && sh_degree > g.sh_degree)
         rc = G3D_ERR(G3D_ERR_ARG, "%s: --sh-degree %d asked for, the scene has SH degree %d", scene, sh_degree, g.sh_degree);
-    if (rc == G3D_OK && g.n == 0) rc = G3D_ERR(G3D_ERR_FORMAT, "%s: the scene holds no Gaussians", scene);
     if (rc == G3D_OK) {
         if (from_file) {
             rc = g3d_cli_load_camera_path(trajectory, &cams, &n);
+        } else if (worldscore) {
+            g3d_camera input = {g3d_worldscore_intrinsics(), g3d_mat4_identity()};
+            if (!(tp.distance > 0) && !(scale > 0)) rc = g3d_render_scene_scale(&g, &input, &scale);
+            ws_speed = tp.distance > 0 ? tp.distance : 0.25 * scale;
+            if (rc == G3D_OK) rc = g3d_worldscore_path(trajectory + 11, ws_speed, &cams, &n);
         } else {
             g3d_camera input;
             input.K = g3d_intrinsics_from_fov(fov, width, height);
@@ -135,6 +150,11 @@ static int run(int argc, char **argv)
     g3d_render_result res = {0};
     double t0 = g3d_time_now();
     if (rc == G3D_OK) rc = g3d_render_to_dir(&g, cams, n, &p, &o, tmp, &res);
+    if (rc == G3D_OK && worldscore) {
+        char *cd = g3d_path_join(tmp, "camera_data.json");
+        rc = cd ? g3d_worldscore_write_camera_data(cd, cams, n, ws_speed) : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+        free(cd);
+    }
     if (rc == G3D_OK) rc = g3d_atomic_dir_commit(tmp, common.output);
     if (rc != G3D_OK && tmp) g3d_atomic_dir_abort(tmp);
     free(tmp);

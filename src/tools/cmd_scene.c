@@ -14,7 +14,8 @@ static const char *DESCRIPTION =
     "Renders the built-in procedural room (textured walls and floor, boxes and spheres at\n"
     "several depths, a window onto a far landscape) with a deterministic ray tracer. For each\n"
     "view it writes rgb_NNN.png, depth_NNN.png (16-bit millimetres), depth_NNN.npy (float32\n"
-    "metres), ids_NNN.png (object ids), plus cameras.json and transforms.json.\n"
+    "metres), ids_NNN.png (object ids), plus cameras.json and transforms.json (which name each\n"
+    "view's image and depth_NNN.png, so the folder is a set of ground-truth views for gen3d eval).\n"
     "Without --pose or --cameras it renders the default camera; --arc N renders N views on an arc.\n"
     "--pose x,y,z,yaw,pitch places one camera (metres; degrees; OpenCV axes: y down, z forward).";
 
@@ -51,6 +52,10 @@ static g3d_status write_view(const char *dir, int i, const g3d_camera *cam, g3d_
         snprintf(name, sizeof name, "rgb_%03d.png", i);
         list->cams[i] = *cam;
         rc = g3d_camera_list_set_name(list, i, name);
+    }
+    if (rc == G3D_OK) {
+        snprintf(name, sizeof name, "depth_%03d.png", i);
+        rc = g3d_camera_list_set_depth(list, i, name);
     }
     g3d_image_free(&rgb);
     g3d_image_free(&depth);

@@ -109,7 +109,7 @@ static int run(int argc, char **argv)
     g3d_gaussians loaded = {0}, g = {0};
     g3d_camera *gen = NULL, *video = NULL;
     int n_gen = 0, n_video = 0;
-    g3d_status rc = g3d_cli_load_scene(scene, &loaded);
+    g3d_status rc = g3d_gaussians_load(scene, &loaded);
     if (rc == G3D_OK) rc = g3d_viewer_reduce(&loaded, o.max_gaussians, o.sh_degree, &g);
     g3d_gaussians_free(&loaded);
     if (rc == G3D_OK) rc = input_cameras(&o, &gen, &n_gen);

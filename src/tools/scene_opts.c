@@ -1,23 +1,8 @@
-/* scene_opts.c - reading the scene and camera files given on the command line. */
+/* scene_opts.c - reading the trajectory and camera files given on the command line. */
 #include "scene_opts.h"
-
-#include "gen3d/ply.h"
-#include "gen3d/spz.h"
 
 #include <string.h>
 #include <sys/stat.h>
-
-g3d_status g3d_cli_load_scene(const char *path, g3d_gaussians *g)
-{
-    char ext[16];
-    g3d_path_ext(path, ext, sizeof ext);
-    struct stat st;
-    memset(g, 0, sizeof *g);
-    if (stat(path, &st) != 0) return G3D_ERR(G3D_ERR_IO, "%s: no such scene file", path);
-    if (!strcmp(ext, "ply")) return g3d_ply_read_gaussians(path, g);
-    if (!strcmp(ext, "spz")) return g3d_spz_load(path, g);
-    return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: unknown scene format '.%s' (expected .ply or .spz)", path, ext);
-}
 
 int g3d_cli_is_file_arg(const char *s)
 {

@@ -1,4 +1,4 @@
-/* scene_opts.h - the scene and camera-file arguments shared by the commands that read a
+/* scene_opts.h - the trajectory and camera-file arguments shared by the commands that read a
  * trained scene (render, view). */
 #ifndef G3D_SCENE_OPTS_H
 #define G3D_SCENE_OPTS_H
@@ -6,10 +6,6 @@
 #include "cli.h"
 #include "gen3d/cameras_json.h"
 #include "gen3d/gaussians.h"
-
-/* Reads a scene by its extension: .ply (standard 3DGS layout) or .spz. *g is created (caller
- * frees). Errors name the file: missing, unknown extension, and the readers' own. */
-g3d_status g3d_cli_load_scene(const char *path, g3d_gaussians *g);
 
 /* 1 when a trajectory argument names a file (it contains '/', ends in .json or exists),
  * 0 when it is a preset name. */
