@@ -3,7 +3,7 @@
 # Idempotent and non-interactive; run as root (or through sudo) on Debian 12.
 set -eu
 
-PKGS="build-essential cmake pkg-config libstb-dev libopenblas-dev libcjson-dev zlib1g-dev libfftw3-dev ffmpeg"
+PKGS="build-essential cmake pkg-config libstb-dev libjpeg62-turbo-dev libopenblas-dev libcjson-dev zlib1g-dev libfftw3-dev ffmpeg"
 
 missing=""
 for p in $PKGS; do
