@@ -57,7 +57,7 @@ static double masked_psnr(const g3d_image *a, const g3d_image *b, const uint8_t 
 TEST(generate_at_the_real_right_view)
 {
     const char *gen3d = getenv("GEN3D");
-    const char *mb = test_shared("testdata/middlebury2014_motorcycle_skimage");
+    const char *mb = test_default_input();
     const char *out = test_tmp("generate_middlebury");
     CHECK(gen3d != NULL);
     if (!gen3d) return;

@@ -48,33 +48,33 @@ static float *golden_image(const g3d_ckpt *act, int *w, int *h)
     return rgb;
 }
 
-static void check_golden(const golden_set *g)
+static void check_golden(golden_set g)
 {
     g3d_ckpt *act = NULL;
     g3d_moge *m = NULL;
     float *rgb = NULL;
     int w = 0, h = 0;
-    CHECK_OK(g3d_ckpt_open(g->acts, &act));
-    CHECK_OK(g3d_moge_load_file(g->model, &m));
+    CHECK_OK(g3d_ckpt_open(g.acts, &act));
+    CHECK_OK(g3d_moge_load_file(g.model, &m));
     if (!m || !act || !(rgb = golden_image(act, &w, &h))) goto out;
     CHECK(g3d_moge_has_normal(m) && g3d_moge_has_mask(m) && g3d_moge_has_scale(m));
-    CHECK(g3d_moge_default_tokens(m) == g->default_tokens);
+    CHECK(g3d_moge_default_tokens(m) == g.default_tokens);
     char desc[160], width[32];
     printf("  %s\n", g3d_moge_describe(m, desc, sizeof desc));
-    snprintf(width, sizeof width, "width %d;", g->width);
-    CHECK(strstr(desc, g->backbone) != NULL && strstr(desc, width) != NULL);
+    snprintf(width, sizeof width, "width %d;", g.width);
+    CHECK(strstr(desc, g.backbone) != NULL && strstr(desc, width) != NULL);
     if (!strstr(desc, width)) goto out;   /* the sizes below assume this width */
 
     size_t npx = (size_t)w * h;
     g3d_moge_trace tr = {.want = 1};
     g3d_moge_output o;
-    CHECK_OK(g3d_moge_forward(m, rgb, w, h, g->tokens, &o, &tr));
-    CHECK(tr.rows == g->rows && tr.cols == g->cols); /* round(sqrt(N / a)), round(sqrt(N a)) */
+    CHECK_OK(g3d_moge_forward(m, rgb, w, h, g.tokens, &o, &tr));
+    CHECK(tr.rows == g.rows && tr.cols == g.cols); /* round(sqrt(N / a)), round(sqrt(N a)) */
     if (o.points) {
         size_t np = (size_t)tr.rows * tr.cols;
         golden_compare(act, "encoder.image_14", tr.image14, (size_t)3 * 14 * tr.rows * 14 * tr.cols);
         golden_compare(act, "encoder.features", tr.features, (size_t)tr.features_c * np);
-        golden_compare(act, "encoder.cls_token", tr.cls, (size_t)g->width);
+        golden_compare(act, "encoder.cls_token", tr.cls, (size_t)g.width);
         char name[32];
         for (int l = 0; l < 5; l++) {
             snprintf(name, sizeof name, "neck.level%d", l);
@@ -89,7 +89,7 @@ static void check_golden(const golden_set *g)
     g3d_moge_output_free(&o);
 
     g3d_moge_result r;
-    CHECK_OK(g3d_moge_infer(m, rgb, w, h, g->tokens, 0, &r));
+    CHECK_OK(g3d_moge_infer(m, rgb, w, h, g.tokens, 0, &r));
     if (r.depth) {
         golden_compare(act, "infer.points", r.points, npx * 3);
         golden_compare(act, "infer.depth", r.depth, npx);
@@ -114,7 +114,7 @@ static void check_golden(const golden_set *g)
     g3d_moge_result_free(&r);
     /* A known horizontal field of view: only the shift is fitted. */
     if (g3d_ckpt_find(act, "infer_fov.depth")) {
-        CHECK_OK(g3d_moge_infer(m, rgb, w, h, g->tokens, 60.0, &r));
+        CHECK_OK(g3d_moge_infer(m, rgb, w, h, g.tokens, 60.0, &r));
         if (r.depth) {
             golden_compare(act, "infer_fov.depth", r.depth, npx);
             golden_compare(act, "infer_fov.intrinsics", r.intrinsics, 9);
@@ -127,17 +127,8 @@ out:
     g3d_ckpt_free(act);
 }
 
-TEST(golden_tiny)
-{
-    golden_set g = tiny();
-    check_golden(&g);
-}
-
-TEST(golden_vits)
-{
-    golden_set g = vits();
-    check_golden(&g);
-}
+TEST(golden_tiny) { check_golden(tiny()); }
+TEST(golden_vits) { check_golden(vits()); }
 
 /* The encoder's resize (bilinear with antialiasing) against PyTorch on a small random image. */
 TEST(resize_bilinear_aa_matches_pytorch)
@@ -167,13 +158,13 @@ TEST(resize_bilinear_aa_matches_pytorch)
 
 /* The depth-estimator table: metric depth with 0 for invalid pixels and predicted intrinsics
  * when the camera is unknown; a known camera fixes the field of view (only the shift is fit). */
-static void check_estimator(const golden_set *g)
+static void check_estimator(golden_set g)
 {
     g3d_ckpt *act = NULL;
     g3d_moge *m = NULL;
     int w = 0, h = 0;
-    CHECK_OK(g3d_ckpt_open(g->acts, &act));
-    CHECK_OK(g3d_moge_load_file(g->model, &m));
+    CHECK_OK(g3d_ckpt_open(g.acts, &act));
+    CHECK_OK(g3d_moge_load_file(g.model, &m));
     float *px = m && act ? golden_image(act, &w, &h) : NULL;
     if (!px) {
         g3d_moge_free(m);
@@ -186,7 +177,7 @@ static void check_estimator(const golden_set *g)
     CHECK_OK(g3d_ckpt_read_alloc(act, "infer.depth", 0, NULL, &ref));
     CHECK_OK(g3d_ckpt_read_alloc(act, "infer.intrinsics", 0, NULL, &Kref));
     g3d_depth_estimator est = {0};
-    CHECK_OK(g3d_moge_estimator(m, g->tokens, &est));
+    CHECK_OK(g3d_moge_estimator(m, g.tokens, &est));
     g3d_intrinsics K = {0};
     CHECK_OK(est.estimate(est.ctx, &rgb, NULL, NULL, &d1, &K));
     if (d1.data && ref && Kref) {
@@ -239,17 +230,8 @@ static void check_estimator(const golden_set *g)
     g3d_ckpt_free(act);
 }
 
-TEST(estimator_metric_depth_and_intrinsics)
-{
-    golden_set g = tiny();
-    check_estimator(&g);
-}
-
-TEST(estimator_metric_depth_and_intrinsics_vits)
-{
-    golden_set g = vits();
-    check_estimator(&g);
-}
+TEST(estimator_metric_depth_and_intrinsics) { check_estimator(tiny()); }
+TEST(estimator_metric_depth_and_intrinsics_vits) { check_estimator(vits()); }
 
 TEST(bad_arguments)
 {
@@ -322,11 +304,11 @@ static void expect_missing(const unsigned char *file, size_t n, const char *name
 }
 
 /* block: a tensor of one of the checkpoint's encoder blocks. */
-static void check_refusals(const golden_set *g, const char *block)
+static void check_refusals(golden_set g, const char *block)
 {
     unsigned char *file = NULL;
     size_t n = 0;
-    CHECK_OK(g3d_read_file(g->model, (size_t)1 << 30, &file, &n));
+    CHECK_OK(g3d_read_file(g.model, (size_t)1 << 30, &file, &n));
     if (!file) return;
     expect_missing(file, n, "neck.res_blocks.2.1.layers.5.bias");
     expect_missing(file, n, block);
@@ -337,23 +319,14 @@ static void check_refusals(const golden_set *g, const char *block)
     /* configuration values: normalisation layers, resamplers, backbone name, the config itself */
     expect_refused(file, n, "none", "gn32", "res_block_in_norm");
     expect_refused(file, n, "conv_transpose", "pixel_shuffle!", "resampler 'pixel_shuffle!'");
-    expect_refused(file, n, g->backbone, "dinov2_vitg14", "dinov2_vitg14");
-    expect_refused(file, n, g->backbone, "dinov3_vits14", "dinov3_vits14");
+    expect_refused(file, n, g.backbone, "dinov2_vitg14", "dinov2_vitg14");
+    expect_refused(file, n, g.backbone, "dinov3_vits14", "dinov3_vits14");
     expect_refused(file, n, "model_config", "model_confiX", "model_config");
     free(file);
 }
 
-TEST(missing_tensor_or_bad_config_named)
-{
-    golden_set g = tiny();
-    check_refusals(&g, "encoder.backbone.blocks.3.mlp.fc2.weight");
-}
-
-TEST(missing_tensor_or_bad_config_named_vits)
-{
-    golden_set g = vits();
-    check_refusals(&g, "encoder.backbone.blocks.7.mlp.fc2.weight");
-}
+TEST(missing_tensor_or_bad_config_named) { check_refusals(tiny(), "encoder.backbone.blocks.3.mlp.fc2.weight"); }
+TEST(missing_tensor_or_bad_config_named_vits) { check_refusals(vits(), "encoder.backbone.blocks.7.mlp.fc2.weight"); }
 
 int main(int argc, char **argv)
 {
