@@ -43,10 +43,10 @@ int g3d_dinov2_depth(const g3d_dinov2 *m);   /* number of blocks */
 int g3d_dinov2_patch(const g3d_dinov2 *m);   /* patch side in pixels (14 in the published models) */
 
 /* Runs the backbone on a normalised image x [3, H, W] (H, W multiples of the patch size, at
- * most 32768) and returns the outputs of the blocks listed in `layers` (0-based, increasing), each passed
- * through the final LayerNorm with the cls token removed: feats[i] is [h*w, D] with
- * h = H/patch, w = W/patch, allocated here and freed by the caller; when cls is non-NULL, cls[i]
- * receives the normalised cls token [D] of the same block (allocated likewise).
+ * most 32768) and returns the outputs of the blocks listed in `layers` (0-based, increasing),
+ * each passed through the final LayerNorm with the cls token removed: feats[i] is [h*w, D]
+ * with h = H/patch, w = W/patch, allocated here and freed by the caller; when cls is non-NULL,
+ * cls[i] receives the normalised cls token [D] of the same block (allocated likewise).
  * The 37x37 (or whatever was trained) position grid is resized bicubically with the
  * official +0.1 offset in the scale factor. trace may be NULL. */
 g3d_status g3d_dinov2_forward(const g3d_dinov2 *m, const float *x, int H, int W, const int *layers, int nlayers,

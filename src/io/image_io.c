@@ -16,7 +16,11 @@
 /* Images are small compared with this cap; it guards against reading huge non-image files. */
 #define MAX_IMAGE_FILE_BYTES ((size_t)1 << 31)
 
-static int is_jpeg(const unsigned char *data, size_t n) { return n >= 3 && data[0] == 0xFF && data[1] == 0xD8 && data[2] == 0xFF; }
+/* JPEG files start with the SOI marker followed by another marker. */
+static int is_jpeg(const unsigned char *data, size_t n)
+{
+    return n >= 3 && data[0] == 0xFF && data[1] == 0xD8 && data[2] == 0xFF;
+}
 
 /* Reads the file and checks the header; returns the stored size and channel count (not for
  * JPEG files, whose header the JPEG decoder reads). */
