@@ -47,6 +47,23 @@ static inline double golden_compare(const g3d_ckpt *act, const char *name, const
     return e;
 }
 
+/* A recorded U8 picture `name` [h, w, 3] as RGB floats in [0, 1] (malloc'd) and its size;
+ * NULL, after a failed check, when it is missing or not [h, w, 3]. */
+static inline float *golden_image(const g3d_ckpt *act, const char *name, int *w, int *h)
+{
+    const g3d_tensor_info *img = act ? g3d_ckpt_find(act, name) : NULL;
+    CHECK_MSG(img && img->ndim == 3 && img->shape[2] == 3, "%s: missing or not [h, w, 3]", name);
+    if (!img || img->ndim != 3 || img->shape[2] != 3) return NULL;
+    *h = (int)img->shape[0];
+    *w = (int)img->shape[1];
+    size_t n = (size_t)*w * *h * 3;
+    float *rgb = malloc(sizeof(float) * n);
+    if (!rgb) return NULL;
+    CHECK_OK(g3d_ckpt_read(act, name, 0, NULL, rgb));
+    for (size_t i = 0; i < n; i++) rgb[i] /= 255.0f;
+    return rgb;
+}
+
 /* CRC-32 (zip's polynomial), to keep an edited zip entry valid. */
 static inline uint32_t golden_crc32(const unsigned char *p, size_t n)
 {

@@ -30,18 +30,15 @@ static void check_golden(const char *weights, const char *acts, const golden_arc
     CHECK_OK(g3d_ckpt_open(weights, &wts));
     if (!act || !wts) goto out;
     CHECK_OK(g3d_dav2_load(wts, &m));
-    const g3d_tensor_info *img = g3d_ckpt_find(act, "input.image_rgb_u8");
     const g3d_tensor_info *pos = g3d_ckpt_find(wts, "pretrained.pos_embed");
     const g3d_tensor_info *rn = g3d_ckpt_find(wts, "depth_head.scratch.layer1_rn.weight");
-    CHECK(img && img->ndim == 3 && img->shape[2] == 3);
     CHECK(pos && pos->ndim == 3 && pos->shape[2] == a->width && rn && rn->shape[0] == a->features);
-    if (!m || !img || !pos || pos->ndim != 3 || pos->shape[2] != a->width || !rn || rn->shape[0] != a->features) goto out;
-    int h = (int)img->shape[0], w = (int)img->shape[1];
+    int w = 0, h = 0;
+    if (!m || !pos || pos->ndim != 3 || pos->shape[2] != a->width || !rn || rn->shape[0] != a->features ||
+        !(rgb = golden_image(act, "input.image_rgb_u8", &w, &h)))
+        goto out;
     size_t npx = (size_t)w * h, D = (size_t)a->width, F = (size_t)a->features;
-    rgb = malloc(sizeof(float) * npx * 3);
     depth = malloc(sizeof(float) * npx);
-    CHECK_OK(g3d_ckpt_read(act, "input.image_rgb_u8", 0, NULL, rgb));
-    for (size_t i = 0; i < npx * 3; i++) rgb[i] /= 255.0f;
     CHECK_OK(g3d_dav2_predict(m, rgb, w, h, a->input_size, depth, &tr));
     CHECK(tr.net_w == a->net_w && tr.net_h == a->net_h);
     if (tr.input && tr.net_w == a->net_w && tr.net_h == a->net_h) {
@@ -90,6 +87,19 @@ static void check_golden(const char *weights, const char *acts, const golden_arc
         CHECK(passed > n / 10 && worst < 1e-5 && clipped_ok);
     }
     g3d_dav2_set_metric(m, 0);
+    /* A square picture whose token grid is the position table's own: the table is used as it is. */
+    const g3d_tensor_info *sq = g3d_ckpt_find(act, "square.depth");
+    float *sqrgb = sq ? golden_image(act, "square.image_rgb_u8", &w, &h) : NULL;
+    if (sqrgb && sq->ndim == 3) {
+        g3d_dav2_trace st = {.want = 1};
+        float *sqdepth = malloc(sizeof(float) * (size_t)w * h);
+        CHECK_OK(g3d_dav2_predict(m, sqrgb, w, h, (int)sq->shape[1], sqdepth, &st));
+        CHECK(st.net_w == st.net_h && st.net_w == (int)sq->shape[1]);
+        if (st.depth) golden_compare(act, "square.depth", st.depth, (size_t)st.net_w * st.net_h);
+        g3d_dav2_trace_free(&st);
+        free(sqdepth);
+    }
+    free(sqrgb);
 out:
     g3d_dav2_trace_free(&mt);
     g3d_dav2_trace_free(&tr);

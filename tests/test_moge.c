@@ -33,21 +33,6 @@ static golden_set vits(void)
                         3600, 384, "dinov2_vits14"};
 }
 
-/* The golden's picture as RGB in [0, 1]: rgb [h, w, 3] (malloc'd) and its size; NULL if absent. */
-static float *golden_image(const g3d_ckpt *act, int *w, int *h)
-{
-    const g3d_tensor_info *img = act ? g3d_ckpt_find(act, "input.image_rgb_u8") : NULL;
-    CHECK(img && img->ndim == 3 && img->shape[2] == 3);
-    if (!img || img->ndim != 3 || img->shape[2] != 3) return NULL;
-    *h = (int)img->shape[0];
-    *w = (int)img->shape[1];
-    size_t n = (size_t)*w * *h * 3;
-    float *rgb = malloc(sizeof(float) * n);
-    CHECK_OK(g3d_ckpt_read(act, "input.image_rgb_u8", 0, NULL, rgb));
-    for (size_t i = 0; i < n; i++) rgb[i] /= 255.0f;
-    return rgb;
-}
-
 static void check_golden(golden_set g)
 {
     g3d_ckpt *act = NULL;
@@ -56,7 +41,7 @@ static void check_golden(golden_set g)
     int w = 0, h = 0;
     CHECK_OK(g3d_ckpt_open(g.acts, &act));
     CHECK_OK(g3d_moge_load_file(g.model, &m));
-    if (!m || !act || !(rgb = golden_image(act, &w, &h))) goto out;
+    if (!m || !act || !(rgb = golden_image(act, "input.image_rgb_u8", &w, &h))) goto out;
     CHECK(g3d_moge_has_normal(m) && g3d_moge_has_mask(m) && g3d_moge_has_scale(m));
     CHECK(g3d_moge_default_tokens(m) == g.default_tokens);
     char desc[160], width[32];
@@ -165,7 +150,7 @@ static void check_estimator(golden_set g)
     int w = 0, h = 0;
     CHECK_OK(g3d_ckpt_open(g.acts, &act));
     CHECK_OK(g3d_moge_load_file(g.model, &m));
-    float *px = m && act ? golden_image(act, &w, &h) : NULL;
+    float *px = m && act ? golden_image(act, "input.image_rgb_u8", &w, &h) : NULL;
     if (!px) {
         g3d_moge_free(m);
         g3d_ckpt_free(act);
