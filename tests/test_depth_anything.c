@@ -19,7 +19,8 @@ typedef struct golden_arch {
  * patch embedding, block outputs, the head's inputs, the four fusion outputs, the depth at the
  * network's and at the image's size. Then the metric head (sigmoid times the maximum depth):
  * against the official metric run where the golden has one ("metric.*"), and always through its
- * relation to the relative head, which keeps the ReLU's input where it passed. */
+ * relation to the relative head, which keeps the ReLU's input where it passed. Where recorded,
+ * a square picture whose token grid is the position table's own ("square.*"). */
 static void check_golden(const char *weights, const char *acts, const golden_arch *a)
 {
     g3d_ckpt *act = NULL, *wts = NULL;
