@@ -69,9 +69,9 @@ static void bench_frame(const char *label, const g3d_frame *f, const char *traj,
 
 int main(int argc, char **argv)
 {
-    const char *dir = argc > 1 ? argv[1] : G3D_SOURCE_DIR "/cache/default-input";
+    const char *dir = argc > 1 ? argv[1] : G3D_DEFAULT_INPUT_DIR;
     g3d_frame f;
-    if (g3d_frame_load_middlebury(dir, &f) == G3D_OK || g3d_frame_load_middlebury(G3D_SHARED_DIR "/testdata/middlebury2014_motorcycle_skimage", &f) == G3D_OK) {
+    if (g3d_frame_load_middlebury(dir, &f) == G3D_OK) {
         g3d_frame_limit_size(&f, 512);
         bench_frame("default input (Middlebury)", &f, "rotate", 6);
         g3d_frame_free(&f);

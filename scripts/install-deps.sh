@@ -6,7 +6,7 @@
 #                   npm registry through `npm ci`), chromium (the real-browser test)
 set -eu
 
-PKGS="build-essential cmake pkg-config libstb-dev libopenblas-dev libcjson-dev zlib1g-dev libfftw3-dev ffmpeg"
+PKGS="build-essential cmake pkg-config libstb-dev libjpeg62-turbo-dev libopenblas-dev libcjson-dev zlib1g-dev libfftw3-dev ffmpeg"
 
 missing=""
 for p in $PKGS; do

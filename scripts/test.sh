@@ -1,10 +1,14 @@
 #!/bin/sh
-# Installs the dependencies, builds gen3d and runs the test suite.
-#   scripts/test.sh               Release build in build/
+# Installs the dependencies, fetches the default input, builds gen3d and runs the test suite.
+#   scripts/test.sh                  Release build in build/
 #   G3D_SANITIZE=1 scripts/test.sh   AddressSanitizer + UBSan build in build-asan/
+#   scripts/test.sh ARGS...          ARGS go to ctest, e.g. -R test_io or -L extended
+# The tests read committed fixtures and the default input; the extended ones also read the
+# large references in ../shared (-DG3D_SHARED_DIR) and report themselves skipped without it.
 set -eu
 cd "$(dirname "$0")/.."
 sh scripts/install-deps.sh
+sh scripts/fetch-default-input.sh >/dev/null
 if [ "${G3D_SANITIZE:-0}" = 1 ]; then
     dir=build-asan
     cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=Debug -DG3D_SANITIZE=ON >/dev/null
@@ -18,4 +22,11 @@ else
     cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=Release >/dev/null
 fi
 cmake --build "$dir" -j "$(nproc)"
-ctest --test-dir "$dir" --output-on-failure -j "$(nproc)" ${skip:-}
+# ctest's output is also kept, to count the extended tests afterwards (sh has no pipefail)
+{ rc=0; ctest --test-dir "$dir" --output-on-failure -j "$(nproc)" ${skip:-} "$@" || rc=$?; echo $rc >"$dir/ctest.rc"; } |
+    tee "$dir/ctest.log"
+total=$(grep -c 'Test *#[0-9]*: [A-Za-z0-9_]*_extended ' "$dir/ctest.log" || true)
+skipped=$(grep -c 'Test *#[0-9]*: [A-Za-z0-9_]*_extended .*Skipped' "$dir/ctest.log" || true)
+why=$(grep -h '^skipped: ' "$dir/Testing/Temporary/LastTest.log" 2>/dev/null | sort -u | head -n 1 || true)
+echo "extended tests (large references in ../shared): $((total - skipped)) ran, $skipped skipped${why:+ -- $why}"
+exit "$(cat "$dir/ctest.rc")"

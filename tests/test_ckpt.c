@@ -9,51 +9,109 @@
 
 static const char *FIX = G3D_SOURCE_DIR "/tests/fixtures/dtypes.safetensors";
 
-TEST(golden_weights)
+/* A Depth Anything V2 checkpoint and its golden activations, as the loader must index them. */
+typedef struct weights_case {
+    const char *weights, *acts;
+    int64_t count, width, pos;     /* tensors, ViT width, position-table rows */
+    int blocks, img_h, img_w;      /* encoder depth; the golden picture's size */
+    g3d_dtype dtype;               /* how the weights are stored */
+    const char *model, *arch;      /* metadata "model" (safetensors only), text in the description */
+} weights_case;
+
+static void check_weights(const weights_case *c)
 {
     g3d_ckpt *ck;
-    CHECK_OK(g3d_ckpt_open(test_shared("golden/depth_anything_v2_vits/weights.safetensors"), &ck));
+    CHECK_OK(g3d_ckpt_open(c->weights, &ck));
     if (!ck) return;
-    CHECK(g3d_ckpt_count(ck) == 239); /* 240 header entries, one of them __metadata__ */
+    CHECK(g3d_ckpt_count(ck) == c->count);
     const g3d_tensor_info *t = g3d_ckpt_find(ck, "pretrained.blocks.0.attn.qkv.weight");
-    CHECK(t && t->dtype == G3D_DT_F16 && t->ndim == 2 && t->shape[0] == 1152 && t->shape[1] == 384);
+    CHECK(t && t->dtype == c->dtype && t->ndim == 2 && t->shape[0] == 3 * c->width && t->shape[1] == c->width);
     t = g3d_ckpt_find(ck, "pretrained.pos_embed");
-    CHECK(t && t->ndim == 3 && t->shape[1] == 1370);
-    CHECK(g3d_ckpt_find(ck, "pretrained.blocks.12.attn.qkv.weight") == NULL);
-    const cJSON *meta = g3d_ckpt_meta(ck);
-    const cJSON *model = cJSON_GetObjectItemCaseSensitive(meta, "model");
-    CHECK(cJSON_IsString(model) && !strcmp(model->valuestring, "depth_anything_v2_vits"));
-    char arch[160];
-    CHECK(g3d_ckpt_arch(ck, arch, sizeof arch) && strstr(arch, "vits") && strstr(arch, "12 blocks"));
+    CHECK(t && t->ndim == 3 && t->shape[1] == c->pos);
+    char name[64];
+    snprintf(name, sizeof name, "pretrained.blocks.%d.attn.qkv.weight", c->blocks);
+    CHECK(g3d_ckpt_find(ck, name) == NULL);
+    if (c->model) {
+        const cJSON *model = cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "model");
+        CHECK(cJSON_IsString(model) && !strcmp(model->valuestring, c->model));
+    }
+    char arch[256], blocks[32];
+    snprintf(blocks, sizeof blocks, "%d blocks", c->blocks);
+    CHECK(g3d_ckpt_arch(ck, arch, sizeof arch) && strstr(arch, c->arch) && strstr(arch, blocks));
     /* Reading with the right shape works; a wrong shape or name is an error naming it. */
-    int64_t qkv_shape[2] = {1152, 384}, wrong[2] = {384, 1152};
+    int64_t qkv_shape[2] = {3 * c->width, c->width}, wrong[2] = {c->width, 3 * c->width};
     float *w = NULL;
     CHECK_OK(g3d_ckpt_read_alloc(ck, "pretrained.blocks.0.attn.qkv.weight", 2, qkv_shape, &w));
     double sum = 0;
     int finite = 1;
-    for (int i = 0; w && i < 1152 * 384; i++) { sum += fabs(w[i]); finite &= isfinite(w[i]); }
+    for (int64_t i = 0; w && i < 3 * c->width * c->width; i++) { sum += fabs(w[i]); finite &= isfinite(w[i]); }
     CHECK(finite && sum > 0);
     free(w);
+    char got[64], want[64];
+    snprintf(got, sizeof got, "[%lld, %lld]", (long long)qkv_shape[0], (long long)qkv_shape[1]);
+    snprintf(want, sizeof want, "expected [%lld, %lld]", (long long)wrong[0], (long long)wrong[1]);
     CHECK_FAILS(g3d_ckpt_read_alloc(ck, "pretrained.blocks.0.attn.qkv.weight", 2, wrong, &w));
-    CHECK(strstr(g3d_error_message(), "[1152, 384]") && strstr(g3d_error_message(), "expected [384, 1152]"));
+    CHECK(strstr(g3d_error_message(), got) && strstr(g3d_error_message(), want));
     CHECK_FAILS(g3d_ckpt_read_alloc(ck, "pretrained.blocks.0.attn.qkvv.weight", 0, NULL, &w));
     CHECK(strstr(g3d_error_message(), "qkvv") != NULL);
     printf("  %lld tensors, %lld parameters: %s\n", (long long)g3d_ckpt_count(ck), (long long)g3d_ckpt_numel(ck), arch);
     g3d_ckpt_free(ck);
 
     /* The activations file: U8 image and F32 tensors. */
-    CHECK_OK(g3d_ckpt_open(test_shared("golden/depth_anything_v2_vits/activations.safetensors"), &ck));
+    CHECK_OK(g3d_ckpt_open(c->acts, &ck));
     if (!ck) return;
     t = g3d_ckpt_find(ck, "input.image_rgb_u8");
-    CHECK(t && t->dtype == G3D_DT_U8 && t->shape[0] == 425 && t->shape[2] == 3);
-    float *img;
+    CHECK(t && t->dtype == G3D_DT_U8 && t->shape[0] == c->img_h && t->shape[1] == c->img_w && t->shape[2] == 3);
+    float *img = NULL;
     CHECK_OK(g3d_ckpt_read_alloc(ck, "input.image_rgb_u8", 0, NULL, &img));
-    int ints = 1;
-    for (int i = 0; img && i < 425 * 640 * 3; i++) ints &= img[i] >= 0 && img[i] <= 255 && img[i] == floorf(img[i]);
+    int ints = img != NULL;
+    for (int i = 0; img && i < c->img_h * c->img_w * 3; i++) ints &= img[i] >= 0 && img[i] <= 255 && img[i] == floorf(img[i]);
     CHECK(ints);
     free(img);
     CHECK(g3d_ckpt_arch(ck, arch, sizeof arch) == NULL);
     g3d_ckpt_free(ck);
+}
+
+/* The tiny Depth Anything V2 fixture: a .pth state dict stored in fp16. */
+TEST(fixture_weights)
+{
+    weights_case c = {test_fixture("dav2_tiny.pth"), test_fixture("dav2_tiny_golden.safetensors"), 127, 128, 37, 4,
+                      43, 61, G3D_DT_F16, NULL, "width 128"};
+    check_weights(&c);
+}
+
+/* The ViT-S golden in ../shared: safetensors with the official names (240 header entries, one of
+ * them __metadata__). */
+TEST(golden_weights)
+{
+    weights_case c = {test_shared("golden/depth_anything_v2_vits/weights.safetensors"),
+                      test_shared("golden/depth_anything_v2_vits/activations.safetensors"), 239, 384, 1370, 12, 425, 640,
+                      G3D_DT_F16, "depth_anything_v2_vits", "vits"};
+    check_weights(&c);
+}
+
+/* A MoGe-2 checkpoint in the official layout: {'model_config', 'model'} with state-dict names. */
+static void check_moge_checkpoint(const char *path, int64_t width)
+{
+    g3d_ckpt *ck;
+    CHECK_OK(g3d_ckpt_open(path, &ck));
+    if (!ck) return;
+    const g3d_tensor_info *t = g3d_ckpt_find(ck, "encoder.backbone.blocks.0.attn.qkv.weight");
+    CHECK(t && t->dtype == G3D_DT_F16 && t->shape[0] == 3 * width && t->shape[1] == width);
+    CHECK(g3d_ckpt_find(ck, "scale_head.0.weight") != NULL);
+    CHECK(cJSON_IsObject(cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "model_config")));
+    printf("  MoGe-2 checkpoint: %lld tensors, %lld parameters\n", (long long)g3d_ckpt_count(ck), (long long)g3d_ckpt_numel(ck));
+    g3d_ckpt_free(ck);
+}
+
+TEST(moge_checkpoint)
+{
+    check_moge_checkpoint(test_fixture("moge_tiny.pt"), 128);
+}
+
+TEST(moge_golden_checkpoint)
+{
+    check_moge_checkpoint(test_shared("golden/moge2_vits_config/model.pt"), 384);
 }
 
 TEST(every_dtype)
@@ -173,16 +231,6 @@ TEST(pytorch_zip)
     CHECK(cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(cfg, "use_norm")) && cJSON_IsNull(cJSON_GetObjectItemCaseSensitive(cfg, "extra")));
     CHECK(cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "epoch")->valuedouble == 7);
     g3d_ckpt_free(ck);
-
-    /* The MoGe-2 golden checkpoint in the official layout. */
-    CHECK_OK(g3d_ckpt_open(test_shared("golden/moge2_vits_config/model.pt"), &ck));
-    if (!ck) return;
-    const g3d_tensor_info *t = g3d_ckpt_find(ck, "encoder.backbone.blocks.0.attn.qkv.weight");
-    CHECK(t && t->dtype == G3D_DT_F16 && t->shape[0] == 1152 && t->shape[1] == 384);
-    CHECK(g3d_ckpt_find(ck, "scale_head.0.weight") != NULL);
-    CHECK(cJSON_IsObject(cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "model_config")));
-    printf("  MoGe-2 golden checkpoint: %lld tensors, %lld parameters\n", (long long)g3d_ckpt_count(ck), (long long)g3d_ckpt_numel(ck));
-    g3d_ckpt_free(ck);
 }
 
 TEST(hostile_pickles)
@@ -299,9 +347,15 @@ TEST(write_round_trip)
     cJSON_Delete(meta);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
-    RUN(golden_weights);
+    if (test_extended(argc, argv)) {
+        RUN(golden_weights);
+        RUN(moge_golden_checkpoint);
+        return test_summary();
+    }
+    RUN(fixture_weights);
+    RUN(moge_checkpoint);
     RUN(every_dtype);
     RUN(hostile_headers);
     RUN(pytorch_zip);

@@ -4,6 +4,15 @@ set -u
 T="$G3D_TEST_TMP/cli"
 . "$G3D_SOURCE_DIR/tests/cli_lib.sh"
 
+if [ "$EXTENDED" = 1 ]; then
+    # the ViT-S golden's weights: a safetensors file with the official names
+    expect 0 "info checkpoint" "$GEN3D" info "$G3D_SHARED_DIR/golden/depth_anything_v2_vits/weights.safetensors"
+    grep -q "239 tensors" "$T/out" && grep -q "Depth Anything V2 (vits" "$T/out" && grep -q "pretrained.blocks.0.attn.qkv.weight.*F16 *\[1152, 384\]" "$T/out" \
+        && ok "info lists tensors and the architecture" || bad "info lists tensors and the architecture"
+    finish
+    exit
+fi
+
 expect 0 "help" "$GEN3D" --help
 grep -q "scene" "$T/out" && grep -q "info" "$T/out" && ok "help lists commands" || bad "help lists commands"
 expect 0 "version" "$GEN3D" --version
@@ -37,20 +46,20 @@ mkdir -p "$T/mine"; echo keep >"$T/mine/file.txt"
 expect 1 "refuses to replace a user folder" "$GEN3D" scene --width 8 --height 8 -q -o "$T/mine"
 [ -s "$T/mine/file.txt" ] && ok "user folder untouched" || bad "user folder untouched"
 
-# prepare: the default input (from the shared copy) and an RGB-D pair.
-MB="$G3D_SHARED_DIR/testdata/middlebury2014_motorcycle_skimage"
+# prepare: the default input and an RGB-D pair (the default input's image and depth as prepare wrote them).
+need_default_input
 expect 0 "prepare default input" "$GEN3D" prepare --default-input "$MB" -q -o "$T/frame"
 for f in rgb.png depth.png depth.npy heldout.png cameras.json points.ply; do
     [ -s "$T/frame/$f" ] && ok "prepare wrote $f" || bad "prepare wrote $f"
 done
 expect 0 "info prepared cloud" "$GEN3D" info "$T/frame/points.ply"
 grep -q "343274 points" "$T/out" && ok "cloud has every valid pixel" || bad "cloud has every valid pixel"
-expect 0 "prepare rgb-d" "$GEN3D" prepare -i "$MB/im0.png" --depth "$MB/depth_mm.png" --fx 994.978 --cx 311.193 --cy 254.877 -q -o "$T/frame2"
-expect 1 "prepare mismatched depth" "$GEN3D" prepare -i "$T/views/rgb_000.png" --depth "$MB/depth_mm.png" -o "$T/never2"
+expect 0 "prepare rgb-d" "$GEN3D" prepare -i "$T/frame/rgb.png" --depth "$T/frame/depth.png" --fx 994.978 --cx 311.193 --cy 254.877 -q -o "$T/frame2"
+expect 1 "prepare mismatched depth" "$GEN3D" prepare -i "$T/views/rgb_000.png" --depth "$T/frame/depth.png" -o "$T/never2"
 grep -q "depth is 741x500" "$T/err" && ok "mismatch message" || bad "mismatch message"
 [ ! -e "$T/never2" ] && ok "no folder after mismatch" || bad "no folder after mismatch"
 expect 1 "prepare missing default input" "$GEN3D" prepare --default-input "$T/nothing-here" -o "$T/never3"
-expect 2 "prepare -i without depth" "$GEN3D" prepare -i "$MB/im0.png" -o "$T/never3"
+expect 2 "prepare -i without depth" "$GEN3D" prepare -i "$T/frame/rgb.png" -o "$T/never3"
 
 # info
 expect 0 "info depth png" "$GEN3D" info "$T/views/depth_000.png"
@@ -58,7 +67,7 @@ grep -q "48x32" "$T/out" && ok "info size" || bad "info size"
 expect 0 "info npy" "$GEN3D" info "$T/views/depth_000.npy"
 grep -q "shape (32, 48)" "$T/out" && ok "info npy shape" || bad "info npy shape"
 expect 0 "info cameras" "$GEN3D" info "$T/views/cameras.json"
-expect 0 "info npz" "$GEN3D" info "$G3D_SHARED_DIR/testdata/middlebury2014_motorcycle_skimage/motorcycle_disp.npz"
+expect 0 "info npz" "$GEN3D" info "$MB/motorcycle_disp.npz"
 grep -q "7.35 %" "$T/out" && ok "info invalid fraction" || bad "info invalid fraction"
 expect 1 "info missing file" "$GEN3D" info "$T/nope.png"
 grep -q "nope.png" "$T/err" && ok "error names the file" || bad "error names the file"
@@ -67,8 +76,9 @@ printf 'garbage' >"$T/garbage.ply"
 expect 1 "info corrupt ply" "$GEN3D" info "$T/garbage.ply"
 expect 1 "info unknown type" "$GEN3D" info "$T/broken.txt"
 expect 2 "info without file" "$GEN3D" info
-expect 0 "info checkpoint" "$GEN3D" info "$G3D_SHARED_DIR/golden/depth_anything_v2_vits/weights.safetensors"
-grep -q "239 tensors" "$T/out" && grep -q "Depth Anything V2 (vits" "$T/out" && grep -q "pretrained.blocks.0.attn.qkv.weight.*F16 *\[1152, 384\]" "$T/out" \
+expect 0 "info checkpoint" "$GEN3D" info "$FIX/dav2_tiny.pth"
+grep -q "127 tensors" "$T/out" && grep -q "Depth Anything V2 (ViT/14, 4 blocks, width 128" "$T/out" \
+    && grep -q "pretrained.blocks.0.attn.qkv.weight.*F16 *\[384, 128\]" "$T/out" \
     && ok "info lists tensors and the architecture" || bad "info lists tensors and the architecture"
 expect 0 "info pytorch checkpoint" "$GEN3D" info "$G3D_SOURCE_DIR/tests/fixtures/state.pth"
 grep -q "9 tensors" "$T/out" && grep -q "encoder.norm.weight.*BF16" "$T/out" && ok "info lists torch tensors" || bad "info lists torch tensors"

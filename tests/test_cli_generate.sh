@@ -3,7 +3,7 @@
 set -u
 T="$G3D_TEST_TMP/cli_generate"
 . "$G3D_SOURCE_DIR/tests/cli_lib.sh"
-MB="$G3D_SHARED_DIR/testdata/middlebury2014_motorcycle_skimage"
+need_default_input
 G="generate --default-input $MB --max-side 96 --steps 2 --extra 2 --iters 40 --sh-degree 1 --frames 8 -t 2"
 
 expect 0 "generate help" "$GEN3D" generate --help

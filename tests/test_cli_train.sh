@@ -3,7 +3,7 @@
 set -u
 T="$G3D_TEST_TMP/cli_train"
 . "$G3D_SOURCE_DIR/tests/cli_lib.sh"
-MB="$G3D_SHARED_DIR/testdata/middlebury2014_motorcycle_skimage"
+need_default_input
 
 expect 0 "train help" "$GEN3D" train --help
 grep -q -- "--iters N" "$T/out" && ok "help lists --iters" || bad "help lists --iters"

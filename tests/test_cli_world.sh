@@ -3,7 +3,7 @@
 set -u
 T="$G3D_TEST_TMP/cli_world"
 . "$G3D_SOURCE_DIR/tests/cli_lib.sh"
-MB="$G3D_SHARED_DIR/testdata/middlebury2014_motorcycle_skimage"
+need_default_input
 
 expect 0 "world help" "$GEN3D" world --help
 for t in rotate lookdown push_in orbit_left pan_right; do
@@ -26,8 +26,9 @@ cmp -s "$T/w/points.ply" "$T/w2/points.ply" && cmp -s "$T/w/views/view_002.png" 
     && ok "deterministic" || bad "deterministic"
 expect 0 "trajectory from a file" "$GEN3D" world --default-input "$MB" --trajectory "$T/w/cameras.json" --steps 2 --extra 0 --max-side 160 -q -o "$T/w3"
 
-# RGB-D input.
-expect 0 "world on an RGB-D pair" "$GEN3D" world -i "$MB/im0.png" --depth "$MB/depth_mm.png" --fx 994.978 --cx 311.193 --cy 254.877 \
+# RGB-D input: the default input's image and depth as prepare writes them.
+expect 0 "prepare an RGB-D pair" "$GEN3D" prepare --default-input "$MB" -q -o "$T/pair"
+expect 0 "world on an RGB-D pair" "$GEN3D" world -i "$T/pair/rgb.png" --depth "$T/pair/depth.png" --fx 994.978 --cx 311.193 --cy 254.877 \
     --steps 1 --angle 20 --extra 1 --max-side 128 --no-layers -q -o "$T/w4"
 
 # Refusals: one line, exit 1 or 2, nothing left behind.
@@ -43,10 +44,10 @@ expect 1 "trajectory leaving the scene" "$GEN3D" world --default-input "$MB" --t
 grep -q "sees none of the scene" "$T/err" && ok "says why" || bad "says why"
 expect 2 "steps out of range" "$GEN3D" world --steps 5000 -o "$T/never"
 expect 2 "extra out of range" "$GEN3D" world --extra -1 -o "$T/never"
-expect 2 "depth without image" "$GEN3D" world --depth "$MB/depth_mm.png" -o "$T/never"
-expect 1 "mismatched depth" "$GEN3D" world -i "$T/w/views/view_000.png" --depth "$MB/depth_mm.png" -o "$T/never"
+expect 2 "depth without image" "$GEN3D" world --depth "$T/pair/depth.png" -o "$T/never"
+expect 1 "mismatched depth" "$GEN3D" world -i "$T/w/views/view_000.png" --depth "$T/pair/depth.png" -o "$T/never"
 printf 'P5\n' >"$T/nodepth.png"
-expect 1 "missing depth file" "$GEN3D" world -i "$MB/im0.png" --depth "$T/none.png" -o "$T/never"
+expect 1 "missing depth file" "$GEN3D" world -i "$T/pair/rgb.png" --depth "$T/none.png" -o "$T/never"
 [ ! -e "$T/never" ] && ok "no output folder after failures" || bad "no output folder after failures"
 ls "$T" | grep -q "tmp-" && bad "temporary folders left behind" || ok "no temporary folders left behind"
 

@@ -1,16 +1,17 @@
 /* The Depth Anything V2 depth estimator: alignment of its relative prediction onto known
- * metric depth, with the golden ViT-S weights and image (shared/golden/depth_anything_v2_vits). */
+ * metric depth, with the tiny golden fixture's weights and image (tests/fixtures/dav2_tiny*). */
 #include "gen3d/depth_estimators.h"
 #include "testutil.h"
 
-#define GOLDEN "golden/depth_anything_v2_vits/"
+#define WEIGHTS test_fixture("dav2_tiny.pth")
+#define ACTS test_fixture("dav2_tiny_golden.safetensors")
 
 TEST(aligns_to_known_inverse_depth)
 {
     g3d_ckpt *act = NULL;
     g3d_dav2 *m = NULL;
-    CHECK_OK(g3d_ckpt_open(test_shared(GOLDEN "activations.safetensors"), &act));
-    CHECK_OK(g3d_dav2_load_file(test_shared(GOLDEN "weights.safetensors"), &m));
+    CHECK_OK(g3d_ckpt_open(ACTS, &act));
+    CHECK_OK(g3d_dav2_load_file(WEIGHTS, &m));
     const g3d_tensor_info *ti = act ? g3d_ckpt_find(act, "input.image_rgb_u8") : NULL;
     CHECK(ti && ti->ndim == 3 && ti->shape[2] == 3);
     if (!ti || !m) {
@@ -68,8 +69,8 @@ TEST(metric_model_returns_metres)
 {
     g3d_ckpt *act = NULL;
     g3d_dav2 *m = NULL;
-    CHECK_OK(g3d_ckpt_open(test_shared(GOLDEN "activations.safetensors"), &act));
-    CHECK_OK(g3d_dav2_load_file(test_shared(GOLDEN "weights.safetensors"), &m));
+    CHECK_OK(g3d_ckpt_open(ACTS, &act));
+    CHECK_OK(g3d_dav2_load_file(WEIGHTS, &m));
     const g3d_tensor_info *ti = act ? g3d_ckpt_find(act, "input.image_rgb_u8") : NULL;
     if (!ti || !m) {
         g3d_dav2_free(m), g3d_ckpt_free(act);

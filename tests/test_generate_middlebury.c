@@ -35,7 +35,7 @@ static double eval_json_psnr(const char *path, const char *method)
 TEST(generate_at_the_real_right_view)
 {
     const char *gen3d = getenv("GEN3D");
-    const char *mb = test_shared("testdata/middlebury2014_motorcycle_skimage");
+    const char *mb = test_default_input();
     const char *out = test_tmp("generate_middlebury");
     CHECK(gen3d != NULL);
     if (!gen3d) return;

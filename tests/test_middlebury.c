@@ -47,7 +47,7 @@ static double warp_error(const g3d_frame *f, const g3d_camera *cam_dst, size_t *
 TEST(reproject_into_real_right_view)
 {
     g3d_frame f;
-    CHECK_OK(g3d_frame_load_middlebury(test_shared("testdata/middlebury2014_motorcycle_skimage"), &f));
+    CHECK_OK(g3d_frame_load_middlebury(test_default_input(), &f));
     if (!f.rgb.data) return;
     CHECK(f.rgb.w == 741 && f.rgb.h == 500 && f.heldout.w == 741);
     /* Depth range from the README: 2.11 .. 5.02 m. */

@@ -1,7 +1,8 @@
-/* MoGe-2 against the official PyTorch activations (seeded weights, ViT-S-sized configuration)
- * in shared/golden/moge2_vits_config: every recorded tensor from the resized encoder input to
+/* MoGe-2 against the official PyTorch activations (seeded weights): the tiny configuration in
+ * tests/fixtures (made by make_moge_golden.py) and, in the extended run, the ViT-S-sized set in
+ * shared/golden/moge2_vits_config. Every recorded tensor from the resized encoder input to
  * infer()'s depth, mask, normals and intrinsics; plus the refusals of wrong checkpoints. */
-#include "testutil.h"
+#include "golden.h"
 
 #include "gen3d/depth_estimators.h"
 #include "gen3d/depthio.h"
@@ -9,94 +10,76 @@
 #include "gen3d/resize.h"
 
 #define GOLDEN "golden/moge2_vits_config/"
-#define TOL 1e-4    /* the golden README's bound for a float32 implementation */
-#define TOKENS 600  /* what the golden run used */
 
-/* Relative L2 error over the entries finite in the reference; *mismatch counts entries where
- * exactly one of the two is finite. */
-static double rel_l2(const float *got, const float *ref, size_t n, size_t *mismatch)
+/* A golden set and what its model's configuration implies. */
+typedef struct golden_set {
+    const char *model, *acts;
+    int tokens;              /* what the golden run used */
+    int rows, cols;          /* the token grid that implies */
+    int default_tokens;      /* the top of model_config.num_tokens_range */
+    int width;               /* ViT width */
+    const char *backbone;    /* model_config.encoder.backbone */
+} golden_set;
+
+static golden_set tiny(void)
 {
-    double num = 0, den = 0;
-    *mismatch = 0;
-    for (size_t i = 0; i < n; i++) {
-        if (isfinite(ref[i]) != isfinite(got[i])) (*mismatch)++;
-        if (!isfinite(ref[i]) || !isfinite(got[i])) continue;
-        double d = (double)got[i] - ref[i];
-        num += d * d;
-        den += (double)ref[i] * ref[i];
-    }
-    return sqrt(num / (den > 0 ? den : 1));
+    return (golden_set){test_fixture("moge_tiny.pt"), test_fixture("moge_tiny_golden.safetensors"), 35, 5, 7, 96,
+                        128, "dinov2_vitt14"};
 }
 
-/* Compares `got` ([n] floats) with golden tensor `name`. */
-static void compare(const g3d_ckpt *act, const char *name, const float *got, size_t n)
+static golden_set vits(void)
 {
-    const g3d_tensor_info *t = g3d_ckpt_find(act, name);
-    CHECK_MSG(t && (size_t)t->numel == n, "%s: missing or %lld elements, expected %zu", name,
-              t ? (long long)t->numel : -1LL, n);
-    CHECK_MSG(got != NULL, "%s: no output", name);
-    if (!t || (size_t)t->numel != n || !got) return;
-    float *ref = NULL;
-    CHECK_OK(g3d_ckpt_read_alloc(act, name, 0, NULL, &ref));
-    if (!ref) return;
-    size_t bad;
-    double e = rel_l2(got, ref, n, &bad);
-    printf("  %-22s rel L2 %.3e\n", name, e);
-    CHECK_MSG(e <= TOL, "%s: relative L2 error %.3e > %g", name, e, TOL);
-    CHECK_MSG(bad == 0, "%s: %zu entries finite in only one of the two", name, bad);
-    free(ref);
+    return (golden_set){test_shared(GOLDEN "model.pt"), test_shared(GOLDEN "activations.safetensors"), 600, 20, 30,
+                        3600, 384, "dinov2_vits14"};
 }
 
-TEST(golden_vits)
+static void check_golden(golden_set g)
 {
     g3d_ckpt *act = NULL;
     g3d_moge *m = NULL;
-    CHECK_OK(g3d_ckpt_open(test_shared(GOLDEN "activations.safetensors"), &act));
-    CHECK_OK(g3d_moge_load_file(test_shared(GOLDEN "model.pt"), &m));
-    const g3d_tensor_info *img = act ? g3d_ckpt_find(act, "input.image_rgb_u8") : NULL;
-    CHECK(img && img->ndim == 3 && img->shape[2] == 3);
-    if (!m || !img) goto out;
+    float *rgb = NULL;
+    int w = 0, h = 0;
+    CHECK_OK(g3d_ckpt_open(g.acts, &act));
+    CHECK_OK(g3d_moge_load_file(g.model, &m));
+    if (!m || !act || !(rgb = golden_image(act, "input.image_rgb_u8", &w, &h))) goto out;
     CHECK(g3d_moge_has_normal(m) && g3d_moge_has_mask(m) && g3d_moge_has_scale(m));
-    CHECK(g3d_moge_default_tokens(m) == 3600);
-    char desc[160];
+    CHECK(g3d_moge_default_tokens(m) == g.default_tokens);
+    char desc[160], width[32];
     printf("  %s\n", g3d_moge_describe(m, desc, sizeof desc));
-    CHECK(strstr(desc, "dinov2_vits14") != NULL);
+    snprintf(width, sizeof width, "width %d;", g.width);
+    CHECK(strstr(desc, g.backbone) != NULL && strstr(desc, width) != NULL);
+    if (!strstr(desc, width)) goto out;   /* the sizes below assume this width */
 
-    int h = (int)img->shape[0], w = (int)img->shape[1];
     size_t npx = (size_t)w * h;
-    float *rgb = malloc(sizeof(float) * npx * 3);
-    CHECK_OK(g3d_ckpt_read(act, "input.image_rgb_u8", 0, NULL, rgb));
-    for (size_t i = 0; i < npx * 3; i++) rgb[i] /= 255.0f;
-
     g3d_moge_trace tr = {.want = 1};
     g3d_moge_output o;
-    CHECK_OK(g3d_moge_forward(m, rgb, w, h, TOKENS, &o, &tr));
-    CHECK(tr.rows == 20 && tr.cols == 30); /* round(sqrt(600 / a)), round(sqrt(600 a)) */
+    CHECK_OK(g3d_moge_forward(m, rgb, w, h, g.tokens, &o, &tr));
+    CHECK(tr.rows == g.rows && tr.cols == g.cols); /* round(sqrt(N / a)), round(sqrt(N a)) */
     if (o.points) {
         size_t np = (size_t)tr.rows * tr.cols;
-        compare(act, "encoder.image_14", tr.image14, (size_t)3 * 14 * tr.rows * 14 * tr.cols);
-        compare(act, "encoder.features", tr.features, (size_t)tr.features_c * np);
-        compare(act, "encoder.cls_token", tr.cls, 384);
+        golden_compare(act, "encoder.image_14", tr.image14, (size_t)3 * 14 * tr.rows * 14 * tr.cols);
+        golden_compare(act, "encoder.features", tr.features, (size_t)tr.features_c * np);
+        golden_compare(act, "encoder.cls_token", tr.cls, (size_t)g.width);
         char name[32];
-        for (int l = 0; l < 3; l++) {
+        for (int l = 0; l < 5; l++) {
             snprintf(name, sizeof name, "neck.level%d", l);
-            compare(act, name, tr.neck[l], (size_t)tr.neck_c[l] * (np << (2 * l)));
+            if (g3d_ckpt_find(act, name) || l < 3) golden_compare(act, name, tr.neck[l], (size_t)tr.neck_c[l] * (np << (2 * l)));
         }
-        compare(act, "forward.points", o.points, npx * 3);
-        compare(act, "forward.mask", o.mask, npx);
-        compare(act, "forward.metric_scale", &o.metric_scale, 1);
+        golden_compare(act, "forward.points", o.points, npx * 3);
+        golden_compare(act, "forward.mask", o.mask, npx);
+        if (g3d_ckpt_find(act, "forward.normal")) golden_compare(act, "forward.normal", o.normal, npx * 3);
+        golden_compare(act, "forward.metric_scale", &o.metric_scale, 1);
     }
     g3d_moge_trace_free(&tr);
     g3d_moge_output_free(&o);
 
     g3d_moge_result r;
-    CHECK_OK(g3d_moge_infer(m, rgb, w, h, TOKENS, 0, &r));
+    CHECK_OK(g3d_moge_infer(m, rgb, w, h, g.tokens, 0, &r));
     if (r.depth) {
-        compare(act, "infer.points", r.points, npx * 3);
-        compare(act, "infer.depth", r.depth, npx);
-        compare(act, "infer.normal", r.normal, npx * 3);
-        compare(act, "infer.intrinsics", r.intrinsics, 9);
-        uint8_t *mask = malloc(npx);
+        golden_compare(act, "infer.points", r.points, npx * 3);
+        golden_compare(act, "infer.depth", r.depth, npx);
+        golden_compare(act, "infer.normal", r.normal, npx * 3);
+        golden_compare(act, "infer.intrinsics", r.intrinsics, 9);
         const g3d_tensor_info *mt = g3d_ckpt_find(act, "infer.mask");
         CHECK(mt && (size_t)mt->numel == npx && mt->dtype == G3D_DT_U8);
         size_t differ = 0, valid = 0;
@@ -112,14 +95,25 @@ TEST(golden_vits)
         CHECK_NEAR(K.fx, r.intrinsics[0] * w, 1e-3);
         CHECK_NEAR(K.cx, 0.5 * (w - 1), 1e-9);
         CHECK_NEAR(K.cy, 0.5 * (h - 1), 1e-9);
-        free(mask);
     }
     g3d_moge_result_free(&r);
-    free(rgb);
+    /* A known horizontal field of view: only the shift is fitted. */
+    if (g3d_ckpt_find(act, "infer_fov.depth")) {
+        CHECK_OK(g3d_moge_infer(m, rgb, w, h, g.tokens, 60.0, &r));
+        if (r.depth) {
+            golden_compare(act, "infer_fov.depth", r.depth, npx);
+            golden_compare(act, "infer_fov.intrinsics", r.intrinsics, 9);
+        }
+        g3d_moge_result_free(&r);
+    }
 out:
+    free(rgb);
     g3d_moge_free(m);
     g3d_ckpt_free(act);
 }
+
+TEST(golden_tiny) { check_golden(tiny()); }
+TEST(golden_vits) { check_golden(vits()); }
 
 /* The encoder's resize (bilinear with antialiasing) against PyTorch on a small random image. */
 TEST(resize_bilinear_aa_matches_pytorch)
@@ -149,29 +143,26 @@ TEST(resize_bilinear_aa_matches_pytorch)
 
 /* The depth-estimator table: metric depth with 0 for invalid pixels and predicted intrinsics
  * when the camera is unknown; a known camera fixes the field of view (only the shift is fit). */
-TEST(estimator_metric_depth_and_intrinsics)
+static void check_estimator(golden_set g)
 {
     g3d_ckpt *act = NULL;
     g3d_moge *m = NULL;
-    CHECK_OK(g3d_ckpt_open(test_shared(GOLDEN "activations.safetensors"), &act));
-    CHECK_OK(g3d_moge_load_file(test_shared(GOLDEN "model.pt"), &m));
-    const g3d_tensor_info *img = act ? g3d_ckpt_find(act, "input.image_rgb_u8") : NULL;
-    if (!m || !img) {
+    int w = 0, h = 0;
+    CHECK_OK(g3d_ckpt_open(g.acts, &act));
+    CHECK_OK(g3d_moge_load_file(g.model, &m));
+    float *px = m && act ? golden_image(act, "input.image_rgb_u8", &w, &h) : NULL;
+    if (!px) {
         g3d_moge_free(m);
         g3d_ckpt_free(act);
         return;
     }
-    int h = (int)img->shape[0], w = (int)img->shape[1];
     size_t npx = (size_t)w * h;
-    g3d_image rgb = {0}, d1 = {0}, d2 = {0};
-    CHECK_OK(g3d_image_create(&rgb, w, h, 3));
-    CHECK_OK(g3d_ckpt_read(act, "input.image_rgb_u8", 0, NULL, rgb.data));
-    for (size_t i = 0; i < npx * 3; i++) rgb.data[i] /= 255.0f;
+    g3d_image rgb = {w, h, 3, px}, d1 = {0}, d2 = {0};
     float *ref = NULL, *Kref = NULL;
     CHECK_OK(g3d_ckpt_read_alloc(act, "infer.depth", 0, NULL, &ref));
     CHECK_OK(g3d_ckpt_read_alloc(act, "infer.intrinsics", 0, NULL, &Kref));
     g3d_depth_estimator est = {0};
-    CHECK_OK(g3d_moge_estimator(m, TOKENS, &est));
+    CHECK_OK(g3d_moge_estimator(m, g.tokens, &est));
     g3d_intrinsics K = {0};
     CHECK_OK(est.estimate(est.ctx, &rgb, NULL, NULL, &d1, &K));
     if (d1.data && ref && Kref) {
@@ -186,7 +177,7 @@ TEST(estimator_metric_depth_and_intrinsics)
             den += ref[i] * ref[i];
         }
         printf("  estimator depth rel L2 %.3e, %zu invalid pixels not 0\n", sqrt(num / den), bad);
-        CHECK(sqrt(num / den) <= TOL && bad == 0);
+        CHECK(sqrt(num / den) <= GOLDEN_TOL && bad == 0);
         CHECK_NEAR(K.fx, Kref[0] * w, 1e-4 * K.fx);
         CHECK_NEAR(K.fy, Kref[4] * h, 1e-4 * K.fy);
         CHECK_NEAR(K.cx, 0.5 * (w - 1), 1e-9);
@@ -224,10 +215,13 @@ TEST(estimator_metric_depth_and_intrinsics)
     g3d_ckpt_free(act);
 }
 
+TEST(estimator_metric_depth_and_intrinsics) { check_estimator(tiny()); }
+TEST(estimator_metric_depth_and_intrinsics_vits) { check_estimator(vits()); }
+
 TEST(bad_arguments)
 {
     g3d_moge *m = NULL;
-    CHECK_OK(g3d_moge_load_file(test_shared(GOLDEN "model.pt"), &m));
+    CHECK_OK(g3d_moge_load_file(test_fixture("moge_tiny.pt"), &m));
     if (!m) return;
     float rgb[3 * 4 * 4] = {0};
     g3d_moge_output o;
@@ -242,58 +236,36 @@ TEST(bad_arguments)
     g3d_moge_free(m);
 }
 
-TEST(wrong_checkpoint_refused)
+/* A Depth Anything checkpoint (named `name` in the message) and a file that is no checkpoint. */
+static void expect_not_moge(const char *dav2, const char *name, const char *other)
 {
     g3d_moge *m = (g3d_moge *)1;
-    CHECK_FAILS(g3d_moge_load_file(test_shared("golden/depth_anything_v2_vits/weights.safetensors"), &m));
+    CHECK_FAILS(g3d_moge_load_file(dav2, &m));
     CHECK(m == NULL);
     CHECK(strstr(g3d_error_message(), "not a MoGe checkpoint") != NULL);
-    CHECK(strstr(g3d_error_message(), "weights.safetensors") != NULL);
+    CHECK(strstr(g3d_error_message(), name) != NULL);
     m = (g3d_moge *)1;
-    CHECK_FAILS(g3d_moge_load_file(test_shared(GOLDEN "README.md"), &m));
+    CHECK_FAILS(g3d_moge_load_file(other, &m));
     CHECK(m == NULL);
 }
 
-/* CRC-32 (zip's polynomial), to keep an edited zip entry valid. */
-static uint32_t crc32_of(const unsigned char *p, size_t n)
+TEST(wrong_checkpoint_refused)
 {
-    uint32_t c = 0xFFFFFFFFu;
-    for (size_t i = 0; i < n; i++) {
-        c ^= p[i];
-        for (int k = 0; k < 8; k++) c = c & 1 ? (c >> 1) ^ 0xEDB88320u : c >> 1;
-    }
-    return ~c;
+    expect_not_moge(test_fixture("dav2_tiny.pth"), "dav2_tiny.pth", test_fixture("moge_tiny_golden.safetensors"));
 }
 
-static uint32_t rd32(const unsigned char *p) { return p[0] | p[1] << 8 | p[2] << 16 | (uint32_t)p[3] << 24; }
-static void wr32(unsigned char *p, uint32_t v) { p[0] = v; p[1] = v >> 8; p[2] = v >> 16; p[3] = v >> 24; }
+TEST(wrong_checkpoint_refused_vits)
+{
+    expect_not_moge(test_shared("golden/depth_anything_v2_vits/weights.safetensors"), "weights.safetensors",
+                    test_shared(GOLDEN "README.md"));
+}
 
-/* Replaces the first occurrence of `from` in the stored data.pkl entry of a PyTorch zip by
- * `to` (same length), fixes the entry's CRC in both headers, then expects the MoGe loader to
- * fail with a message containing `expect`. */
+/* Replaces the first occurrence of `from` in the checkpoint's data.pkl by `to` (same length),
+ * then expects the MoGe loader to fail with a message containing `expect`. */
 static void expect_refused(const unsigned char *file, size_t n, const char *from, const char *to, const char *expect)
 {
-    unsigned char *z = malloc(n);
-    memcpy(z, file, n);
-    size_t len = strlen(from);
-    int done = 0;
-    for (size_t c = 0; c + 46 < n && !done; c++) {
-        if (rd32(z + c) != 0x02014b50u) continue;    /* central directory entry */
-        size_t nlen = z[c + 28] | z[c + 29] << 8;
-        if (nlen < 8 || memcmp(z + c + 46 + nlen - 8, "data.pkl", 8)) continue;
-        size_t lh = rd32(z + c + 42), size = rd32(z + c + 24);
-        size_t data = lh + 30 + (z[lh + 26] | z[lh + 27] << 8) + (z[lh + 28] | z[lh + 29] << 8);
-        for (size_t i = data; i + len <= data + size; i++)
-            if (!memcmp(z + i, from, len)) {
-                memcpy(z + i, to, len);
-                uint32_t crc = crc32_of(z + data, size);
-                wr32(z + c + 16, crc);
-                wr32(z + lh + 14, crc);
-                done = 1;
-                break;
-            }
-    }
-    CHECK_MSG(done, "'%s' not found in data.pkl", from);
+    unsigned char *z = golden_edit_pickle(file, n, from, to);
+    if (!z) return;
     g3d_ckpt *ck = NULL;
     g3d_moge *m = (g3d_moge *)1;
     CHECK_OK(g3d_ckpt_open_memory(z, n, "edited.pt", &ck));
@@ -307,36 +279,54 @@ static void expect_refused(const unsigned char *file, size_t n, const char *from
     free(z);
 }
 
-TEST(missing_tensor_or_bad_config_named)
+/* Renames `name` (its last letter becomes X) and expects the loader to name it. */
+static void expect_missing(const unsigned char *file, size_t n, const char *name)
+{
+    char to[128];
+    snprintf(to, sizeof to, "%s", name);
+    to[strlen(to) - 1] = 'X';
+    expect_refused(file, n, name, to, name);
+}
+
+/* block: a tensor of one of the checkpoint's encoder blocks. */
+static void check_refusals(golden_set g, const char *block)
 {
     unsigned char *file = NULL;
     size_t n = 0;
-    CHECK_OK(g3d_read_file(test_shared(GOLDEN "model.pt"), (size_t)1 << 30, &file, &n));
+    CHECK_OK(g3d_read_file(g.model, (size_t)1 << 30, &file, &n));
     if (!file) return;
-    expect_refused(file, n, "neck.res_blocks.2.1.layers.5.bias", "neck.res_blocks.2.1.layers.5.biaX",
-                   "neck.res_blocks.2.1.layers.5.bias");
-    expect_refused(file, n, "encoder.backbone.blocks.7.mlp.fc2.weight", "encoder.backbone.blocks.7.mlp.fc2.weighX",
-                   "encoder.backbone.blocks.7.mlp.fc2.weight");
-    expect_refused(file, n, "encoder.backbone.pos_embed", "encoder.backbone.pos_embeX", "encoder.backbone.pos_embed");
-    expect_refused(file, n, "scale_head.2.weight", "scale_head.2.weighX", "scale_head.2.weight");
-    expect_refused(file, n, "encoder.image_std", "encoder.image_stX", "encoder.image_std");
-    expect_refused(file, n, "mask_head.output_blocks.4.weight", "mask_head.output_blocks.4.weighX",
-                   "mask_head.output_blocks.4.weight");
+    expect_missing(file, n, "neck.res_blocks.2.1.layers.5.bias");
+    expect_missing(file, n, block);
+    expect_missing(file, n, "encoder.backbone.pos_embed");
+    expect_missing(file, n, "scale_head.2.weight");
+    expect_missing(file, n, "encoder.image_std");
+    expect_missing(file, n, "mask_head.output_blocks.4.weight");
     /* configuration values: normalisation layers, resamplers, backbone name, the config itself */
     expect_refused(file, n, "none", "gn32", "res_block_in_norm");
     expect_refused(file, n, "conv_transpose", "pixel_shuffle!", "resampler 'pixel_shuffle!'");
-    expect_refused(file, n, "dinov2_vits14", "dinov2_vitg14", "dinov2_vitg14");
+    expect_refused(file, n, g.backbone, "dinov2_vitg14", "dinov2_vitg14");
+    expect_refused(file, n, g.backbone, "dinov3_vits14", "dinov3_vits14");
     expect_refused(file, n, "model_config", "model_confiX", "model_config");
     free(file);
 }
 
-int main(void)
+TEST(missing_tensor_or_bad_config_named) { check_refusals(tiny(), "encoder.backbone.blocks.3.mlp.fc2.weight"); }
+TEST(missing_tensor_or_bad_config_named_vits) { check_refusals(vits(), "encoder.backbone.blocks.7.mlp.fc2.weight"); }
+
+int main(int argc, char **argv)
 {
+    if (test_extended(argc, argv)) {
+        RUN(wrong_checkpoint_refused_vits);
+        RUN(missing_tensor_or_bad_config_named_vits);
+        RUN(golden_vits);
+        RUN(estimator_metric_depth_and_intrinsics_vits);
+        return test_summary();
+    }
     RUN(wrong_checkpoint_refused);
     RUN(missing_tensor_or_bad_config_named);
     RUN(resize_bilinear_aa_matches_pytorch);
     RUN(bad_arguments);
-    RUN(golden_vits);
+    RUN(golden_tiny);
     RUN(estimator_metric_depth_and_intrinsics);
     return test_summary();
 }

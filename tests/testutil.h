@@ -7,9 +7,16 @@
  * the test goes on so one run shows every failure. test_summary() prints
  * "N passed, N failed" and returns non-zero when anything failed.
  *
- * Paths: test_shared("golden/x") is a path under ../shared (G3D_SHARED_DIR),
- * test_tmp("name") a scratch path under the build folder. Both return static buffers that the
- * next call of the same function overwrites (a small ring of them, so a few can be alive).
+ * Data: test_fixture("x") is tests/fixtures/x (committed, always there); test_default_input()
+ * the folder scripts/fetch-default-input.sh fills (G3D_DEFAULT_INPUT_DIR, the Middlebury frame);
+ * test_shared("golden/x") a path under ../shared (G3D_SHARED_DIR), which only extended runs
+ * read; test_tmp("name") a scratch path under the build folder. They return static buffers that
+ * the next call of the same function overwrites (a small ring of them, so a few can be alive).
+ *
+ * Extended runs: a test program whose main() asks test_extended(argc, argv) is registered twice
+ * by CMake, plainly and as <name>_extended (label `extended`, argument --extended). In the
+ * extended run it checks only what needs ../shared; when that folder is absent the run ends at
+ * once with one line saying so and exit status TEST_SKIP, which ctest reports as skipped.
  */
 #ifndef G3D_TESTUTIL_H
 #define G3D_TESTUTIL_H
@@ -22,7 +29,7 @@
 
 #include "gen3d/base.h"
 
-static int t_failed_checks, t_tests_passed, t_tests_failed;
+static int t_failed_checks, t_tests_passed, t_tests_failed, t_extended;
 static const char *t_current;
 
 #define TEST(name) static void test_##name(void)
@@ -96,11 +103,48 @@ static inline int test_summary(void)
     return t_tests_failed ? 1 : 0;
 }
 
+#define TEST_SKIP 77   /* ctest's SKIP_RETURN_CODE for the extended runs */
+
+/* Non-zero in the extended run (argument --extended); exits with TEST_SKIP when it has no
+ * shared folder. */
+static inline int test_extended(int argc, char **argv)
+{
+    struct stat st;
+    if (argc < 2 || strcmp(argv[1], "--extended")) return 0;
+    if (stat(G3D_SHARED_DIR, &st) != 0 || !S_ISDIR(st.st_mode)) {
+        printf("skipped: no shared reference data at %s (configure with -DG3D_SHARED_DIR=DIR)\n", G3D_SHARED_DIR);
+        exit(TEST_SKIP);
+    }
+    return t_extended = 1;
+}
+
+static inline const char *test_fixture(const char *name)
+{
+    static char buf[8][1024];
+    static int k;
+    char *b = buf[k++ & 7];
+    snprintf(b, 1024, "%s/tests/fixtures/%s", G3D_SOURCE_DIR, name);
+    return b;
+}
+
+/* The default input's folder; a failed check with the remedy when its files are not there. */
+static inline const char *test_default_input(void)
+{
+    struct stat st;
+    char p[1024];
+    snprintf(p, sizeof p, "%s/motorcycle_disp.npz", G3D_DEFAULT_INPUT_DIR);
+    CHECK_MSG(stat(p, &st) == 0, "no default input in %s: run scripts/fetch-default-input.sh", G3D_DEFAULT_INPUT_DIR);
+    return G3D_DEFAULT_INPUT_DIR;
+}
+
+/* A path under the shared folder; a failed check outside the extended run, which alone may
+ * read it (a clone has no such folder). */
 static inline const char *test_shared(const char *rel)
 {
     static char buf[8][1024];
     static int k;
     char *b = buf[k++ & 7];
+    CHECK_MSG(t_extended, "%s: shared data read outside the extended run", rel);
     snprintf(b, 1024, "%s/%s", G3D_SHARED_DIR, rel);
     return b;
 }

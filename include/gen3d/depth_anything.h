@@ -40,9 +40,12 @@ typedef struct g3d_dav2_trace {
 
 void g3d_dav2_trace_free(g3d_dav2_trace *t);
 
-/* Loads the model from an open checkpoint (the checkpoint may be freed afterwards). Every
- * tensor is checked by name and shape; the encoder size (ViT-S/B/L) is recognised from the
- * shapes. Errors (G3D_ERR_MODEL) name the tensor. Free with g3d_dav2_free. */
+/* Loads the model from an open checkpoint (the checkpoint may be freed afterwards). The
+ * architecture is read from the tensor shapes: the encoder's width, depth, MLP width and
+ * position grid, the head's features and per-level channels; the four blocks feeding the head
+ * are the last of each quarter of the encoder (the official lists; ViT-L's first is block 4).
+ * Every tensor is checked by name and shape; errors (G3D_ERR_MODEL, G3D_ERR_UNSUPPORTED for
+ * the use_clstoken / use_bn head variants) name the tensor. Free with g3d_dav2_free. */
 g3d_status g3d_dav2_load(const g3d_ckpt *ck, g3d_dav2 **out);
 /* The same from a file path. */
 g3d_status g3d_dav2_load_file(const char *path, g3d_dav2 **out);

@@ -2,7 +2,10 @@
  *
  * Readers take PNG (8 or 16 bits, grey / grey+alpha / RGB / RGBA) and JPEG, check the
  * header before decoding (sides above G3D_MAX_IMAGE_SIDE are rejected), and return a
- * g3d_image with values in [0, 1]. Alpha is dropped. Errors name the file.
+ * g3d_image with values in [0, 1]. Alpha is dropped. Errors name the file. JPEG files decode
+ * to exactly the pixels PIL and OpenCV decode (libjpeg-turbo with their settings), so a model
+ * sees what its official code sees; EXIF orientation is not applied; truncated and CMYK files
+ * are refused.
  *
  * The PNG writer is our own (zlib deflate), so 8- and 16-bit output share one code path.
  * Writes are atomic: a failed write leaves nothing under the final name.

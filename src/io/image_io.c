@@ -1,17 +1,29 @@
-/* Image files: PNG/JPEG decoding through stb_image, PNG encoding with zlib. */
+/* Image files: JPEG decoding through libjpeg-turbo set up as PIL and OpenCV use it, PNG
+ * decoding through stb_image, PNG encoding with zlib. */
 #include "gen3d/imageio.h"
 
 #include <math.h>
+#include <setjmp.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <zlib.h>
 
+#include <jpeglib.h>       /* Debian's libjpeg62-turbo */
+#include <jerror.h>
 #include <stb/stb_image.h> /* decoder from Debian's libstb */
 
 /* Images are small compared with this cap; it guards against reading huge non-image files. */
 #define MAX_IMAGE_FILE_BYTES ((size_t)1 << 31)
 
-/* Reads the file and checks the header; returns the stored size and channel count. */
+/* JPEG files start with the SOI marker followed by another marker. */
+static int is_jpeg(const unsigned char *data, size_t n)
+{
+    return n >= 3 && data[0] == 0xFF && data[1] == 0xD8 && data[2] == 0xFF;
+}
+
+/* Reads the file and checks the header; returns the stored size and channel count (not for
+ * JPEG files, whose header the JPEG decoder reads). */
 static g3d_status read_checked(const char *path, unsigned char **data, size_t *n, int *w, int *h, int *c)
 {
     G3D_TRY(g3d_read_file(path, MAX_IMAGE_FILE_BYTES, data, n));
@@ -19,6 +31,7 @@ static g3d_status read_checked(const char *path, unsigned char **data, size_t *n
         free(*data);
         return G3D_ERR(G3D_ERR_FORMAT, "%s: empty file", path);
     }
+    if (is_jpeg(*data, *n)) return G3D_OK;   /* libjpeg checks the header */
     if (*n > INT32_MAX || !stbi_info_from_memory(*data, (int)*n, w, h, c)) {
         free(*data);
         return G3D_ERR(G3D_ERR_FORMAT, "%s: not a PNG or JPEG image (or corrupt header)", path);
@@ -31,6 +44,80 @@ static g3d_status read_checked(const char *path, unsigned char **data, size_t *n
     return G3D_OK;
 }
 
+/* ---- JPEG decoder ----------------------------------------------------------------------- */
+
+/* libjpeg reports fatal errors through error_exit, which must not return: jump back out. */
+typedef struct jpeg_err {
+    struct jpeg_error_mgr mgr;
+    jmp_buf env;
+    char msg[JMSG_LENGTH_MAX];
+} jpeg_err;
+
+static void jpeg_fail(j_common_ptr cinfo)
+{
+    jpeg_err *e = (jpeg_err *)cinfo->err;
+    e->mgr.format_message(cinfo, e->msg);
+    longjmp(e->env, 1);
+}
+
+/* Warnings about data libjpeg decodes around (stray bytes before a marker) stay quiet, as in
+ * PIL and OpenCV; a file that ends early is an error, as in PIL (libjpeg would fill the rest
+ * with grey). */
+static void jpeg_warning(j_common_ptr cinfo, int level)
+{
+    if (level < 0 && cinfo->err->msg_code == JWRN_JPEG_EOF) jpeg_fail(cinfo);
+}
+
+/* Decodes JPEG data as `channels` channels (1 grey, 3 RGB, 0 as stored) with the decoder's
+ * defaults (accurate integer IDCT, fancy chroma upsampling), which are what PIL's Image.open
+ * and OpenCV's imread use: the pixels equal theirs bit for bit. EXIF orientation is not
+ * applied (as in PIL; OpenCV's imread rotates). */
+static g3d_status jpeg_decode(const char *path, const unsigned char *data, size_t n, int channels, g3d_image *img)
+{
+    struct jpeg_decompress_struct cinfo;
+    jpeg_err err;
+    unsigned char *volatile row = NULL;
+    volatile g3d_status rc = G3D_OK;
+    cinfo.err = jpeg_std_error(&err.mgr);
+    err.mgr.error_exit = jpeg_fail;
+    err.mgr.emit_message = jpeg_warning;
+    if (setjmp(err.env)) {
+        rc = G3D_ERR(G3D_ERR_FORMAT, "%s: cannot decode JPEG (%s)", path, err.msg);
+        goto done;
+    }
+    jpeg_create_decompress(&cinfo);
+    jpeg_mem_src(&cinfo, data, (unsigned long)n);
+    jpeg_read_header(&cinfo, TRUE);
+    if (cinfo.jpeg_color_space == JCS_CMYK || cinfo.jpeg_color_space == JCS_YCCK) {
+        rc = G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: CMYK JPEG images are not supported", path);
+        goto done;
+    }
+    if (cinfo.image_width < 1 || cinfo.image_height < 1 || cinfo.image_width > G3D_MAX_IMAGE_SIDE ||
+        cinfo.image_height > G3D_MAX_IMAGE_SIDE) {
+        rc = G3D_ERR(G3D_ERR_FORMAT, "%s: image size %ux%u out of range (sides 1..%d)", path, cinfo.image_width,
+                     cinfo.image_height, G3D_MAX_IMAGE_SIDE);
+        goto done;
+    }
+    int out_c = channels ? channels : cinfo.num_components == 1 ? 1 : 3;
+    cinfo.out_color_space = out_c == 3 ? JCS_RGB : JCS_GRAYSCALE;
+    jpeg_start_decompress(&cinfo);
+    int w = (int)cinfo.output_width, h = (int)cinfo.output_height;
+    rc = g3d_image_create(img, w, h, out_c);
+    if (rc == G3D_OK && !(row = malloc((size_t)w * out_c))) rc = G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", path);
+    while (rc == G3D_OK && cinfo.output_scanline < cinfo.output_height) {
+        float *dst = img->data + (size_t)cinfo.output_scanline * w * out_c;
+        JSAMPROW rows[1] = {(JSAMPROW)row};
+        jpeg_read_scanlines(&cinfo, rows, 1);
+        for (size_t i = 0; i < (size_t)w * out_c; i++) dst[i] = (float)row[i] / 255.0f;
+    }
+    if (rc == G3D_OK) jpeg_finish_decompress(&cinfo);
+done:
+    jpeg_destroy_decompress(&cinfo);
+    free(row);
+    if (rc != G3D_OK) g3d_image_free(img);
+    return rc;
+}
+
 g3d_status g3d_image_load(const char *path, int channels, g3d_image *img)
 {
     unsigned char *data;
@@ -40,6 +127,11 @@ g3d_status g3d_image_load(const char *path, int channels, g3d_image *img)
     if (channels != 0 && channels != 1 && channels != 3)
         return G3D_ERR(G3D_ERR_ARG, "%s: can only load 1 or 3 channels, not %d", path, channels);
     G3D_TRY(read_checked(path, &data, &n, &w, &h, &c));
+    if (is_jpeg(data, n)) {
+        g3d_status rc = jpeg_decode(path, data, n, channels, img);
+        free(data);
+        return rc;
+    }
     int out_c = channels ? channels : (c >= 3 ? 3 : 1);
     is16 = stbi_is_16_bit_from_memory(data, (int)n);
     void *px = is16 ? (void *)stbi_load_16_from_memory(data, (int)n, &w, &h, &c, out_c)
@@ -64,7 +156,7 @@ g3d_status g3d_image_load_u16(const char *path, g3d_image *img)
     int w, h, c;
     memset(img, 0, sizeof *img);
     G3D_TRY(read_checked(path, &data, &n, &w, &h, &c));
-    if (!stbi_is_16_bit_from_memory(data, (int)n)) {
+    if (is_jpeg(data, n) || !stbi_is_16_bit_from_memory(data, (int)n)) {
         free(data);
         return G3D_ERR(G3D_ERR_FORMAT, "%s: 16-bit PNG expected, got an 8-bit image", path);
     }

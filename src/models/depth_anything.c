@@ -22,7 +22,7 @@ typedef struct fusion {
 
 struct g3d_dav2 {
     g3d_dinov2 *backbone;
-    int dim, feat, oc[4], layers[4];
+    int dim, feat, oc[4], layers[4], hidden2;   /* hidden2: output_conv2's width (32 published) */
     conv project[4], resize[4], rn[4], out1, out2a, out2b;
     fusion refine[4];
     float max_depth;   /* > 0: a metric model, output = max_depth * sigmoid(head) in metres */
@@ -91,8 +91,8 @@ static g3d_status load_head(const g3d_ckpt *ck, g3d_dav2 *m)
         }
     }
     G3D_TRY(load_conv(ck, "depth_head.scratch.output_conv1", F / 2, F, 3, 1, &m->out1));
-    G3D_TRY(load_conv(ck, "depth_head.scratch.output_conv2.0", 32, F / 2, 3, 1, &m->out2a));
-    return load_conv(ck, "depth_head.scratch.output_conv2.2", 1, 32, 1, 1, &m->out2b);
+    G3D_TRY(load_conv(ck, "depth_head.scratch.output_conv2.0", m->hidden2, F / 2, 3, 1, &m->out2a));
+    return load_conv(ck, "depth_head.scratch.output_conv2.2", 1, m->hidden2, 1, 1, &m->out2b);
 }
 
 g3d_status g3d_dav2_load(const g3d_ckpt *ck, g3d_dav2 **out)
@@ -102,19 +102,37 @@ g3d_status g3d_dav2_load(const g3d_ckpt *ck, g3d_dav2 **out)
     if (!rn || rn->ndim != 4)
         return G3D_ERR(G3D_ERR_MODEL, "%s: not a Depth Anything V2 checkpoint: tensor "
                        "depth_head.scratch.layer1_rn.weight %s", g3d_ckpt_path(ck), rn ? "is not 4-D" : "is missing");
+    /* Variants of the head that no published checkpoint uses: the class-token readout
+     * (use_clstoken) and batch norm in the fusion blocks (use_bn). */
+    static const char *const variants[] = {"depth_head.readout_projects.0.0.weight",
+                                           "depth_head.scratch.refinenet1.resConfUnit1.bn1.weight"};
+    for (int i = 0; i < 2; i++)
+        if (g3d_ckpt_find(ck, variants[i]))
+            return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: tensor %s: this Depth Anything V2 head variant (%s) is not supported",
+                           g3d_ckpt_path(ck), variants[i], i ? "use_bn" : "use_clstoken");
+    const g3d_tensor_info *o2 = g3d_ckpt_find(ck, "depth_head.scratch.output_conv2.0.weight");
+    if (!o2 || o2->ndim != 4)
+        return G3D_ERR(G3D_ERR_MODEL, "%s: tensor depth_head.scratch.output_conv2.0.weight %s", g3d_ckpt_path(ck),
+                       o2 ? "is not 4-D" : "is missing");
     g3d_dav2 *m = calloc(1, sizeof *m);
     if (!m) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
     g3d_status rc = g3d_dinov2_load(ck, "pretrained.", &m->backbone);
+    if (rc == G3D_OK && g3d_dinov2_patch(m->backbone) != PATCH)
+        rc = G3D_ERR(G3D_ERR_MODEL, "%s: tensor pretrained.patch_embed.proj.weight has %d-pixel patches; the Depth "
+                     "Anything V2 head works on %d-pixel patches", g3d_ckpt_path(ck), g3d_dinov2_patch(m->backbone), PATCH);
     if (rc == G3D_OK) {
         m->dim = g3d_dinov2_width(m->backbone);
         m->feat = (int)rn->shape[0];
-        /* Blocks feeding the head, per encoder depth (official intermediate_layer_idx). */
-        static const int l12[4] = {2, 5, 8, 11}, l24[4] = {4, 11, 17, 23};
+        m->hidden2 = (int)o2->shape[0];
+        /* The blocks feeding the head. The official lists (ViT-S and B [2, 5, 8, 11], ViT-L
+         * [4, 11, 17, 23], ViT-g [9, 19, 29, 39]) take the last block of each quarter of the
+         * encoder, except ViT-L's first, which is block 4; every other depth follows the rule. */
         int depth = g3d_dinov2_depth(m->backbone);
-        if (depth != 12 && depth != 24)
-            rc = G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: backbone with %d blocks (expected 12 or 24)", g3d_ckpt_path(ck), depth);
-        else
-            memcpy(m->layers, depth == 12 ? l12 : l24, sizeof m->layers);
+        if (depth < 4)
+            rc = G3D_ERR(G3D_ERR_MODEL, "%s: the backbone has %d blocks (pretrained.blocks.*); the head needs 4",
+                         g3d_ckpt_path(ck), depth);
+        for (int i = 0; i < 4; i++) m->layers[i] = depth * (i + 1) / 4 - 1;
+        if (depth == 24) m->layers[0] = 4;
         for (int i = 0; i < 4 && rc == G3D_OK; i++) {
             char name[64];
             snprintf(name, sizeof name, "depth_head.projects.%d.weight", i);
@@ -297,14 +315,14 @@ static g3d_status head(const g3d_dav2 *m, float *const *feats, int h, int w, flo
     if (rc == G3D_OK) {
         o1 = alloc_f((size_t)(F / 2) * ph * pw);
         o1up = alloc_f((size_t)(F / 2) * H * W);
-        o2 = alloc_f((size_t)32 * H * W);
+        o2 = alloc_f((size_t)m->hidden2 * H * W);
         if (!o1 || !o1up || !o2) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
     }
     if (rc == G3D_OK) rc = run_conv(&m->out1, path[0], ph, pw, 1, o1);
     if (rc == G3D_OK) rc = resize_planes(o1, F / 2, ph, pw, o1up, H, W);
     if (rc == G3D_OK) rc = run_conv(&m->out2a, o1up, H, W, 1, o2);
     if (rc == G3D_OK) {
-        g3d_nn_relu(o2, (size_t)32 * H * W);
+        g3d_nn_relu(o2, (size_t)m->hidden2 * H * W);
         rc = run_conv(&m->out2b, o2, H, W, 1, depth);
     }
     if (rc == G3D_OK && m->max_depth > 0) {

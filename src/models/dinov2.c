@@ -1,4 +1,6 @@
-/* DINOv2 ViT backbone: patch embedding, resized position grid, pre-norm blocks with LayerScale. */
+/* DINOv2 ViT backbone: patch embedding, resized position grid, pre-norm blocks with LayerScale.
+ * Every size is read from the tensors; only the head width (64, as in every published DINOv2)
+ * is not stored in them. */
 #include "gen3d/dinov2.h"
 
 #include "gen3d/nn.h"
@@ -9,7 +11,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define PATCH 14
 #define HEAD_DIM 64
 #define LN_EPS 1e-6f
 /* The official code adds 0.1 to the target grid size before deriving the scale factor, to
@@ -22,7 +23,7 @@ typedef struct dino_block {
 } dino_block;
 
 struct g3d_dinov2 {
-    int dim, depth, hidden, grid; /* grid: side of the trained position grid */
+    int dim, depth, hidden, grid, patch; /* grid: side of the trained position grid */
     float *cls, *pos, *pew, *peb, *normw, *normb;
     dino_block *blocks;
 };
@@ -75,6 +76,14 @@ g3d_status g3d_dinov2_load(const g3d_ckpt *ck, const char *prefix, g3d_dinov2 **
                        pe ? "is not [1, N, D]" : "is missing");
     if (find(&l, "blocks.0.mlp.w12.weight"))
         return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: DINOv2 with a SwiGLU MLP (ViT-G) is not supported", g3d_ckpt_path(ck));
+    /* Register tokens come with antialiased position interpolation in the official builders. */
+    if (find(&l, "register_tokens"))
+        return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: tensor %sregister_tokens: DINOv2 with register tokens is not supported",
+                       g3d_ckpt_path(ck), l.prefix);
+    const g3d_tensor_info *pw = find(&l, "patch_embed.proj.weight");
+    if (!pw || pw->ndim != 4 || pw->shape[1] != 3 || pw->shape[2] != pw->shape[3] || pw->shape[2] < 1 || pw->shape[2] > 64)
+        return G3D_ERR(G3D_ERR_MODEL, "%s: tensor %spatch_embed.proj.weight %s", g3d_ckpt_path(ck), l.prefix,
+                       pw ? "is not [D, 3, p, p] with square patches of at most 64 pixels" : "is missing");
     int64_t npos = pe->shape[1] - 1, D = pe->shape[2];
     int grid = (int)lround(sqrt((double)npos));
     if (grid * grid != npos || D % HEAD_DIM || D > 4096)
@@ -96,9 +105,10 @@ g3d_status g3d_dinov2_load(const g3d_ckpt *ck, const char *prefix, g3d_dinov2 **
     m->depth = depth;
     m->hidden = (int)fc1->shape[0];
     m->grid = grid;
+    m->patch = (int)pw->shape[2];
     m->blocks = calloc((size_t)(depth ? depth : 1), sizeof *m->blocks);
     g3d_status rc = m->blocks ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
-    const int64_t d1[] = {D}, cls[] = {1, 1, D}, pos[] = {1, npos + 1, D}, pew[] = {D, 3, PATCH, PATCH};
+    const int64_t d1[] = {D}, cls[] = {1, 1, D}, pos[] = {1, npos + 1, D}, pew[] = {D, 3, m->patch, m->patch};
     const int64_t qkvw[] = {3 * D, D}, qkvb[] = {3 * D}, projw[] = {D, D}, fc1w[] = {m->hidden, D},
                   fc1b[] = {m->hidden}, fc2w[] = {D, m->hidden};
     if (rc == G3D_OK) rc = load(&l, &m->cls, 3, cls, "cls_token");
@@ -132,6 +142,7 @@ g3d_status g3d_dinov2_load(const g3d_ckpt *ck, const char *prefix, g3d_dinov2 **
 
 int g3d_dinov2_width(const g3d_dinov2 *m) { return m->dim; }
 int g3d_dinov2_depth(const g3d_dinov2 *m) { return m->depth; }
+int g3d_dinov2_patch(const g3d_dinov2 *m) { return m->patch; }
 
 void g3d_dinov2_trace_free(g3d_dinov2_trace *t)
 {
@@ -213,13 +224,13 @@ static float *dup(const float *v, size_t n)
 g3d_status g3d_dinov2_forward(const g3d_dinov2 *m, const float *x, int H, int W, const int *layers, int nlayers,
                               float **feats, float **cls, g3d_dinov2_trace *trace)
 {
-    if (H <= 0 || W <= 0 || H % PATCH || W % PATCH || H > 32768 || W > 32768)
-        return G3D_ERR(G3D_ERR_ARG, "DINOv2 input %dx%d: sides must be positive multiples of %d up to 32768", W, H,
-                       PATCH);
+    const int P = m->patch;
+    if (H <= 0 || W <= 0 || H % P || W % P || H > 32768 || W > 32768)
+        return G3D_ERR(G3D_ERR_ARG, "DINOv2 input %dx%d: sides must be positive multiples of %d up to 32768", W, H, P);
     for (int i = 0; i < nlayers; i++)
         if (layers[i] < 0 || layers[i] >= m->depth || (i && layers[i] <= layers[i - 1]))
             return G3D_ERR(G3D_ERR_ARG, "DINOv2: layer list must be increasing block indices below %d", m->depth);
-    int h = H / PATCH, w = W / PATCH, np = h * w, n = np + 1, D = m->dim, K = 3 * PATCH * PATCH;
+    int h = H / P, w = W / P, np = h * w, n = np + 1, D = m->dim, K = 3 * P * P;
     for (int i = 0; i < nlayers; i++) {
         feats[i] = NULL;
         if (cls) cls[i] = NULL;
@@ -239,14 +250,13 @@ g3d_status g3d_dinov2_forward(const g3d_dinov2 *m, const float *x, int H, int W,
         rc = G3D_ERR(G3D_ERR_NOMEM, "DINOv2: cannot allocate activations for %dx%d", W, H);
         goto done;
     }
-    /* Patch embedding as a product: each 14x14x3 patch becomes a row in the weight's order. */
+    /* Patch embedding as a product: each P x P x 3 patch becomes a row in the weight's order. */
     for (int py = 0; py < h; py++)
         for (int px = 0; px < w; px++) {
             float *row = patches + (size_t)(py * w + px) * K;
             for (int c = 0; c < 3; c++)
-                for (int ky = 0; ky < PATCH; ky++)
-                    memcpy(row + (c * PATCH + ky) * PATCH, x + ((size_t)c * H + py * PATCH + ky) * W + px * PATCH,
-                           sizeof(float) * PATCH);
+                for (int ky = 0; ky < P; ky++)
+                    memcpy(row + (c * P + ky) * P, x + ((size_t)c * H + py * P + ky) * W + px * P, sizeof(float) * P);
         }
     g3d_nn_linear(patches, np, K, m->pew, m->peb, D, X + D);
     if (trace && trace->want && !(trace->patch_embed = dup(X + D, (size_t)np * D))) {

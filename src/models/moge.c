@@ -266,20 +266,19 @@ static g3d_status load_encoder(const loader *l, const cJSON *enc, g3d_moge *m)
     const char *bb = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(enc, "backbone"));
     if (!bb) return cfg_err(l, "encoder.backbone", "is missing or not a string");
     snprintf(m->backbone_name, sizeof m->backbone_name, "%s", bb);
-    static const struct { const char *name; int width, depth; } known[] = {
-        {"dinov2_vits14", 384, 12}, {"dinov2_vitb14", 768, 12}, {"dinov2_vitl14", 1024, 24}};
-    int k = -1;
-    for (int i = 0; i < 3; i++)
-        if (!strcmp(bb, known[i].name)) k = i;
-    if (k < 0)
-        return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: model_config.encoder.backbone '%s' is not supported (dinov2_vits14, "
-                       "dinov2_vitb14, dinov2_vitl14)", l->path, bb);
+    /* The official encoder builds the backbone by this name from DINOv2's hub functions; their
+     * sizes are read from the tensors, but what the tensors do not show must be known: the
+     * ViT-g builders use a SwiGLU MLP, and the *_reg builders add register tokens whose
+     * position grid is interpolated with antialiasing. Neither is supported. */
+    if (strncmp(bb, "dinov2_vit", 10) || !strncmp(bb, "dinov2_vitg", 11) || strstr(bb, "_reg"))
+        return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: model_config.encoder.backbone '%s' is not supported (a DINOv2 ViT "
+                       "without SwiGLU MLP or registers, such as dinov2_vits14, dinov2_vitb14, dinov2_vitl14)", l->path, bb);
     G3D_TRY(g3d_dinov2_load(l->ck, "encoder.backbone.", &m->backbone));
     m->D = g3d_dinov2_width(m->backbone);
     int depth = g3d_dinov2_depth(m->backbone);
-    if (m->D != known[k].width || depth != known[k].depth)
-        return G3D_ERR(G3D_ERR_MODEL, "%s: model_config.encoder.backbone is '%s' but encoder.backbone.* holds %d blocks of "
-                       "width %d", l->path, bb, depth, m->D);
+    if (g3d_dinov2_patch(m->backbone) != PATCH)
+        return G3D_ERR(G3D_ERR_MODEL, "%s: tensor encoder.backbone.patch_embed.proj.weight has %d-pixel patches; the MoGe "
+                       "encoder works on %d-pixel patches", l->path, g3d_dinov2_patch(m->backbone), PATCH);
     const cJSON *il = cJSON_GetObjectItemCaseSensitive(enc, "intermediate_layers");
     if (is_int(il) && il->valuedouble >= 1 && il->valuedouble <= depth && il->valuedouble <= MAX_LAYERS) {
         /* an integer n means the last n blocks */

@@ -196,21 +196,49 @@ g3d_status g3d_ckpt_read_alloc(const g3d_ckpt *ck, const char *name, int ndim, c
     return G3D_OK;
 }
 
+/* The name of a published DINOv2 encoder of this width and depth ("ViT" otherwise): a label
+ * only, every figure printed comes from the tensors. */
+static const char *vit_name(int64_t width, int blocks)
+{
+    if (width == 384 && blocks == 12) return "vits: ViT-S";
+    if (width == 768 && blocks == 12) return "vitb: ViT-B";
+    if (width == 1024 && blocks == 24) return "vitl: ViT-L";
+    if (width == 1536 && blocks == 40) return "vitg: ViT-g";
+    return "ViT";
+}
+
+/* Counts prefix.blocks.{i}.attn.qkv.weight. */
+static int count_blocks(const g3d_ckpt *ck, const char *prefix)
+{
+    char name[96];
+    int blocks = 0;
+    for (;; blocks++) {
+        snprintf(name, sizeof name, "%sblocks.%d.attn.qkv.weight", prefix, blocks);
+        if (!g3d_ckpt_find(ck, name)) return blocks;
+    }
+}
+
+/* The first dimension of a tensor, or 0. */
+static long long dim0(const g3d_ckpt *ck, const char *name)
+{
+    const g3d_tensor_info *t = g3d_ckpt_find(ck, name);
+    return t && t->ndim > 0 ? (long long)t->shape[0] : 0;
+}
+
 const char *g3d_ckpt_arch(const g3d_ckpt *ck, char *buf, size_t n)
 {
-    /* Depth Anything V2: DINOv2 under "pretrained.", DPT head under "depth_head."; the width
-     * of the qkv projection names the ViT size. */
+    /* Depth Anything V2: DINOv2 under "pretrained.", DPT head under "depth_head."; sizes from
+     * the shapes (heads of 64 channels, as in every published DINOv2). */
     const g3d_tensor_info *qkv = g3d_ckpt_find(ck, "pretrained.blocks.0.attn.qkv.weight");
+    const g3d_tensor_info *pe = g3d_ckpt_find(ck, "pretrained.patch_embed.proj.weight");
     if (qkv && g3d_ckpt_find(ck, "depth_head.scratch.output_conv2.2.weight") && qkv->ndim == 2) {
-        int blocks = 0;
-        char name[96];
-        for (;; blocks++) {
-            snprintf(name, sizeof name, "pretrained.blocks.%d.attn.qkv.weight", blocks);
-            if (!g3d_ckpt_find(ck, name)) break;
-        }
+        int blocks = count_blocks(ck, "pretrained.");
         int64_t d = qkv->shape[1];
-        const char *size = d == 384 ? "vits: ViT-S/14" : d == 768 ? "vitb: ViT-B/14" : d == 1024 ? "vitl: ViT-L/14" : d == 1536 ? "vitg: ViT-g/14" : "unknown ViT size";
-        snprintf(buf, n, "Depth Anything V2 (%s, %d blocks, width %lld)", size, blocks, (long long)d);
+        snprintf(buf, n, "Depth Anything V2 (%s/%lld, %d blocks, width %lld, %lld attention heads; DPT features %lld, out "
+                 "channels %lld, %lld, %lld, %lld)", vit_name(d, blocks), pe && pe->ndim == 4 ? (long long)pe->shape[3] : 0,
+                 blocks, (long long)d, (long long)d / 64, dim0(ck, "depth_head.scratch.layer1_rn.weight"),
+                 dim0(ck, "depth_head.projects.0.weight"), dim0(ck, "depth_head.projects.1.weight"),
+                 dim0(ck, "depth_head.projects.2.weight"), dim0(ck, "depth_head.projects.3.weight"));
         return buf;
     }
     /* MoGe-2: DINOv2 under "encoder.backbone.", a ConvStack neck, the configuration beside the
@@ -221,14 +249,9 @@ const char *g3d_ckpt_arch(const g3d_ckpt *ck, char *buf, size_t n)
         const cJSON *cfg = cJSON_GetObjectItemCaseSensitive(ck->meta, "model_config");
         const cJSON *enc = cJSON_GetObjectItemCaseSensitive(cfg, "encoder");
         const char *bb = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(enc, "backbone"));
-        int blocks = 0;
-        char name[96];
-        for (;; blocks++) {
-            snprintf(name, sizeof name, "encoder.backbone.blocks.%d.attn.qkv.weight", blocks);
-            if (!g3d_ckpt_find(ck, name)) break;
-        }
-        snprintf(buf, n, "MoGe-2 (%s, %d blocks, width %lld; heads: points%s%s%s)", bb ? bb : "DINOv2", blocks,
-                 (long long)mq->shape[1], g3d_ckpt_find(ck, "normal_head.input_blocks.0.weight") ? ", normal" : "",
+        int blocks = count_blocks(ck, "encoder.backbone.");
+        snprintf(buf, n, "MoGe-2 (%s, %d blocks, width %lld, %lld attention heads; heads: points%s%s%s)", bb ? bb : "DINOv2",
+                 blocks, (long long)mq->shape[1], (long long)mq->shape[1] / 64, g3d_ckpt_find(ck, "normal_head.input_blocks.0.weight") ? ", normal" : "",
                  g3d_ckpt_find(ck, "mask_head.input_blocks.0.weight") ? ", mask" : "",
                  g3d_ckpt_find(ck, "scale_head.0.weight") ? ", metric scale" : "");
         return buf;
