@@ -377,14 +377,7 @@ TEST(refusals)
 /* The default input (scripts/fetch-default-input.sh): left view = input, right view scored. */
 TEST(default_input_views)
 {
-    const char *dir = G3D_SOURCE_DIR "/cache/default-input";
-    char probe[1024];
-    snprintf(probe, sizeof probe, "%s/motorcycle_disp.npz", dir);
-    if (!test_file_exists(probe) &&
-        system("sh '" G3D_SOURCE_DIR "/scripts/fetch-default-input.sh' >/dev/null 2>&1") != 0) {
-        printf("       skipped: the default input is not fetched and scripts/fetch-default-input.sh failed\n");
-        return;
-    }
+    const char *dir = test_default_input();
     g3d_eval_views v;
     g3d_eval_views_params vp;
     g3d_eval_views_params_default(&vp);
