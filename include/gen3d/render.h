@@ -41,7 +41,7 @@ typedef g3d_status (*g3d_render_frame_fn)(void *user, int index, const g3d_camer
 
 /* Renders the first g->n Gaussians from each of the n cameras (n >= 1), in order, handing each
  * frame to fn. Errors: G3D_ERR_ARG (n < 1, a camera size outside 1..G3D_MAX_IMAGE_SIDE,
- * non-finite intrinsics or pose, sh_degree above the model's, cancelled), G3D_ERR_NOMEM, and
+ * non-finite intrinsics or pose, sh_degree above the model's), G3D_CANCELLED, G3D_ERR_NOMEM, and
  * whatever fn returns. */
 g3d_status g3d_render_path(const g3d_gaussians *g, const g3d_camera *cams, int n,
                            const g3d_render_opts *p, g3d_render_frame_fn fn, void *user);

@@ -80,7 +80,7 @@ g3d_status g3d_render_path(const g3d_gaussians *g, const g3d_camera *cams, int n
         }
         rc = fn(user, i, c, &rgb, p->depth ? &depth : NULL);
         if (rc == G3D_OK && g3d_progress_report(&p->progress, "render", i + 1, n, NULL))
-            rc = G3D_ERR(G3D_ERR_ARG, "render: cancelled");
+            rc = G3D_ERR(G3D_CANCELLED, "render: cancelled");
     }
     g3d_image_free(&rgb);
     g3d_image_free(&depth);

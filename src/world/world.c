@@ -143,13 +143,14 @@ g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int
         out->cams[i].c2w = g3d_mat4_mul(input->cam.c2w, poses[i]);
     }
     if (rc == G3D_OK) rc = lift_input(out, input, inpaint, depth, masks, p, seed);
-    g3d_progress_report(&p->progress, "world", 1, n_poses, NULL);
+    if (rc == G3D_OK && g3d_progress_report(&p->progress, "world", 1, n_poses, NULL))
+        rc = G3D_ERR(G3D_CANCELLED, "world generation cancelled");
     for (int i = 1; i < n_poses && rc == G3D_OK; i++) {
         rc = world_step(out, i, inpaint, depth, p, seed);
         char info[96];
         snprintf(info, sizeof info, "holes %.1f %%, %lld points", 100.0 * out->steps[i].hole_fraction, (long long)out->cloud.n);
         if (rc == G3D_OK && g3d_progress_report(&p->progress, "world", i + 1, n_poses, info))
-            rc = G3D_ERR(G3D_ERR_ARG, "world generation cancelled");
+            rc = G3D_ERR(G3D_CANCELLED, "world generation cancelled");
     }
     /* Extra views: orbits around the poses, rendered from the final cloud, not inpainted. */
     if (rc == G3D_OK && p->extra_views > 0) {
@@ -173,7 +174,8 @@ g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int
             out->extra_cams[k].c2w = g3d_mat4_mul(input->cam.c2w, orb[pose * per + j]);
             rc = g3d_cloud_render(&out->cloud, &out->extra_cams[k], &p->render, &out->extra_rgb[k], NULL, &out->extra_mask[k]);
             if (rc == G3D_OK) out->n_extra = k + 1;
-            g3d_progress_report(&p->progress, "extra views", k + 1, m, NULL);
+            if (rc == G3D_OK && g3d_progress_report(&p->progress, "extra views", k + 1, m, NULL))
+                rc = G3D_ERR(G3D_CANCELLED, "world generation cancelled");
         }
         free(orb);
     }
