@@ -4,8 +4,8 @@
 #include "testutil.h"
 
 #include "gen3d/depth_estimators.h"
-#include "gen3d/depthio.h"
 #include "gen3d/moge.h"
+#include "gen3d/npy.h"
 #include "gen3d/resize.h"
 
 #define GOLDEN "golden/moge2_vits_config/"

@@ -1,6 +1,7 @@
 /* Building the input frame from files: RGB-D pairs and the Middlebury default input. */
 #include "gen3d/frame.h"
 #include "gen3d/depthio.h"
+#include "gen3d/npy.h"
 #include "gen3d/imageio.h"
 #include "gen3d/cameras_json.h"
 #include "gen3d/ply.h"

@@ -4,6 +4,7 @@
 #include "gen3d/ckpt.h"
 
 #include <cjson/cJSON.h>
+#include "gen3d/npy.h"
 #include "gen3d/depthio.h"
 #include "gen3d/imageio.h"
 #include "gen3d/ply.h"
