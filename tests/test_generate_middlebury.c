@@ -4,6 +4,7 @@
  * the left view also sees. The floor below is our regression bound: the figure reached when it
  * was set, less a margin for thread-count and platform differences. */
 #include "gen3d/frame.h"
+#include "gen3d/loss.h"
 #include "gen3d/ply.h"
 #include "gen3d/raster.h"
 #include "testutil.h"
@@ -16,11 +17,11 @@
 
 /* Pixels of the right view that the left view's ground-truth depth reaches first (z-buffered
  * nearest-pixel forward warp): the co-visible region, where the right image is predictable. */
-static uint8_t *covisible(const g3d_frame *f, size_t *count)
+static void covisible(const g3d_frame *f, g3d_image *m, size_t *count)
 {
     int w = f->heldout.w, h = f->heldout.h;
     float *zbuf = malloc(sizeof(float) * (size_t)w * h);
-    uint8_t *m = calloc((size_t)w * h, 1);
+    g3d_image_create(m, w, h, 1);
     for (size_t i = 0; i < (size_t)w * h; i++) zbuf[i] = INFINITY;
     for (int y = 0; y < f->rgb.h; y++)
         for (int x = 0; x < f->rgb.w; x++) {
@@ -34,24 +35,8 @@ static uint8_t *covisible(const g3d_frame *f, size_t *count)
             if (zz < zbuf[k]) zbuf[k] = (float)zz;
         }
     *count = 0;
-    for (size_t i = 0; i < (size_t)w * h; i++) *count += m[i] = isfinite(zbuf[i]);
+    for (size_t i = 0; i < (size_t)w * h; i++) *count += m->data[i] = isfinite(zbuf[i]);
     free(zbuf);
-    return m;
-}
-
-static double masked_psnr(const g3d_image *a, const g3d_image *b, const uint8_t *m)
-{
-    double se = 0;
-    size_t n = 0;
-    for (size_t i = 0; i < (size_t)a->w * a->h; i++) {
-        if (!m[i]) continue;
-        for (int c = 0; c < 3; c++) {
-            double d = a->data[3 * i + c] - b->data[3 * i + c];
-            se += d * d;
-        }
-        n += 3;
-    }
-    return n ? 10 * log10(1.0 / (se / n + 1e-12)) : 0;
 }
 
 TEST(generate_at_the_real_right_view)
@@ -78,7 +63,8 @@ TEST(generate_at_the_real_right_view)
     if (!f.heldout.data || !g.n) return;
 
     size_t n_cov;
-    uint8_t *cov = covisible(&f, &n_cov);
+    g3d_image cov;
+    covisible(&f, &cov, &n_cov);
     g3d_image img;
     g3d_image_create(&img, f.heldout.w, f.heldout.h, 3);
     g3d_raster_ws *ws;
@@ -86,16 +72,17 @@ TEST(generate_at_the_real_right_view)
     g3d_raster_settings_default(&s);
     CHECK_OK(g3d_raster_ws_create(&ws));
     CHECK_OK(g3d_raster_fwd(ws, &g, &f.heldout_cam, &s, img.data, NULL, NULL, NULL));
-    double psnr = masked_psnr(&img, &f.heldout, cov);
+    double psnr, still;
+    CHECK_OK(g3d_psnr(&img, &f.heldout, &cov, &psnr));
     /* the left image itself, shown as if it were the right one: what ignoring parallax gives */
-    double still = masked_psnr(&f.rgb, &f.heldout, cov);
+    CHECK_OK(g3d_psnr(&f.rgb, &f.heldout, &cov, &still));
     printf("       Middlebury right view, %dx%d, %.0f%% co-visible: generate %.2f dB (left image as is: %.2f dB)\n",
            img.w, img.h, 100.0 * n_cov / ((double)img.w * img.h), psnr, still);
     CHECK(psnr >= PSNR_FLOOR);
     CHECK(psnr > still + 2.0);
     g3d_raster_ws_free(ws);
     g3d_image_free(&img);
-    free(cov);
+    g3d_image_free(&cov);
     g3d_gaussians_free(&g);
     g3d_frame_free(&f);
 }

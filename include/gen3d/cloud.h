@@ -61,10 +61,6 @@ g3d_status g3d_cloud_render(const g3d_cloud *c, const g3d_camera *cam, const g3d
 /* Copies the cloud into a PLY point set (colours rounded to 8 bits). */
 g3d_status g3d_cloud_to_points(const g3d_cloud *c, g3d_points *out);
 
-/* Peak signal-to-noise ratio (dB, peak 1) between a and b over the pixels where mask > 0.5
- * (mask NULL: all). Returns INFINITY for identical images, NAN when no pixel counts. */
-double g3d_image_psnr(const g3d_image *a, const g3d_image *b, const g3d_image *mask);
-
 #ifdef __cplusplus
 }
 #endif

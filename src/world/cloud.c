@@ -293,21 +293,3 @@ g3d_status g3d_cloud_to_points(const g3d_cloud *c, g3d_points *out)
     for (int64_t i = 0; i < 3 * c->n; i++) out->rgb[i] = (uint8_t)lrintf(255.0f * fminf(1.0f, fmaxf(0.0f, c->rgb[i])));
     return G3D_OK;
 }
-
-double g3d_image_psnr(const g3d_image *a, const g3d_image *b, const g3d_image *mask)
-{
-    double se = 0;
-    size_t n = 0;
-    if (a->w != b->w || a->h != b->h || a->c != b->c) return NAN;
-    for (size_t i = 0; i < (size_t)a->w * a->h; i++) {
-        if (mask && !(mask->data[i] > 0.5f)) continue;
-        for (int k = 0; k < a->c; k++) {
-            double d = (double)a->data[i * a->c + k] - b->data[i * a->c + k];
-            se += d * d;
-        }
-        n += (size_t)a->c;
-    }
-    if (n == 0) return NAN;
-    if (se == 0) return INFINITY;
-    return 10.0 * log10((double)n / se);
-}
