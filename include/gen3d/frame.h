@@ -71,12 +71,6 @@ g3d_status g3d_frame_save(const g3d_frame *f, const char *dir);
  * intrinsics accordingly; the held-out view likewise. */
 g3d_status g3d_frame_limit_size(g3d_frame *f, int max_side);
 
-#define G3D_MIDDLEBURY_F 994.978
-#define G3D_MIDDLEBURY_CX0 311.193
-#define G3D_MIDDLEBURY_CY 254.877
-#define G3D_MIDDLEBURY_DOFFS 31.086
-#define G3D_MIDDLEBURY_BASELINE_M 0.193001
-
 #ifdef __cplusplus
 }
 #endif

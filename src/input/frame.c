@@ -13,6 +13,14 @@
 #include <string.h>
 #include <sys/stat.h>
 
+/* The calibration of Middlebury 2014 "Motorcycle" (calib.txt of the perfect-rectification
+ * pair): focal length, principal points, disparity offset, baseline. */
+#define MIDDLEBURY_F 994.978
+#define MIDDLEBURY_CX0 311.193
+#define MIDDLEBURY_CY 254.877
+#define MIDDLEBURY_DOFFS 31.086
+#define MIDDLEBURY_BASELINE_M 0.193001
+
 void g3d_frame_free(g3d_frame *f)
 {
     if (!f) return;
@@ -148,14 +156,14 @@ g3d_status g3d_frame_load_middlebury(const char *dir, g3d_frame *f)
     }
     if ((rc = g3d_image_create(&f->depth, f->rgb.w, f->rgb.h, 1)) != G3D_OK) goto done;
     memcpy(f->depth.data, disp.data, g3d_image_size(&f->depth) * sizeof(float));
-    g3d_disparity_to_depth(&f->depth, G3D_MIDDLEBURY_F, G3D_MIDDLEBURY_BASELINE_M, G3D_MIDDLEBURY_DOFFS);
+    g3d_disparity_to_depth(&f->depth, MIDDLEBURY_F, MIDDLEBURY_BASELINE_M, MIDDLEBURY_DOFFS);
 
-    f->cam.K = g3d_intrinsics_make(G3D_MIDDLEBURY_F, G3D_MIDDLEBURY_F, G3D_MIDDLEBURY_CX0, G3D_MIDDLEBURY_CY, f->rgb.w, f->rgb.h);
+    f->cam.K = g3d_intrinsics_make(MIDDLEBURY_F, MIDDLEBURY_F, MIDDLEBURY_CX0, MIDDLEBURY_CY, f->rgb.w, f->rgb.h);
     f->cam.c2w = g3d_mat4_identity();
-    f->heldout_cam.K = g3d_intrinsics_make(G3D_MIDDLEBURY_F, G3D_MIDDLEBURY_F, G3D_MIDDLEBURY_CX0 + G3D_MIDDLEBURY_DOFFS,
-                                           G3D_MIDDLEBURY_CY, f->heldout.w, f->heldout.h);
+    f->heldout_cam.K = g3d_intrinsics_make(MIDDLEBURY_F, MIDDLEBURY_F, MIDDLEBURY_CX0 + MIDDLEBURY_DOFFS,
+                                           MIDDLEBURY_CY, f->heldout.w, f->heldout.h);
     f->heldout_cam.c2w = g3d_mat4_identity();
-    f->heldout_cam.c2w.m[0][3] = G3D_MIDDLEBURY_BASELINE_M;
+    f->heldout_cam.c2w.m[0][3] = MIDDLEBURY_BASELINE_M;
     snprintf(f->name, sizeof f->name, "middlebury-motorcycle");
     rc = g3d_frame_validate(f, dir);
 done:
