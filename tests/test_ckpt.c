@@ -1,6 +1,7 @@
 /* Checkpoints: the safetensors reader on the golden weights, every dtype, hostile headers. */
 #include "testutil.h"
 #include "gen3d/ckpt.h"
+#include "gen3d/recognize.h"
 
 #include <cjson/cJSON.h>
 #include <stdint.h>
@@ -24,7 +25,7 @@ TEST(golden_weights)
     const cJSON *model = cJSON_GetObjectItemCaseSensitive(meta, "model");
     CHECK(cJSON_IsString(model) && !strcmp(model->valuestring, "depth_anything_v2_vits"));
     char arch[160];
-    CHECK(g3d_ckpt_arch(ck, arch, sizeof arch) && strstr(arch, "vits") && strstr(arch, "12 blocks"));
+    CHECK(g3d_model_describe(ck, arch, sizeof arch) && strstr(arch, "vits") && strstr(arch, "12 blocks"));
     /* Reading with the right shape works; a wrong shape or name is an error naming it. */
     int64_t qkv_shape[2] = {1152, 384}, wrong[2] = {384, 1152};
     float *w = NULL;
@@ -52,7 +53,7 @@ TEST(golden_weights)
     for (int i = 0; img && i < 425 * 640 * 3; i++) ints &= img[i] >= 0 && img[i] <= 255 && img[i] == floorf(img[i]);
     CHECK(ints);
     free(img);
-    CHECK(g3d_ckpt_arch(ck, arch, sizeof arch) == NULL);
+    CHECK(g3d_model_describe(ck, arch, sizeof arch) == NULL);
     g3d_ckpt_free(ck);
 }
 

@@ -2,8 +2,8 @@
 #include "gen3d/depth_estimators.h"
 
 #include "gen3d/depthfit.h"
+#include "gen3d/recognize.h"
 
-#include <cjson/cJSON.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -150,12 +150,9 @@ g3d_status g3d_depth_model_open(const char *path, const g3d_depth_model_opts *o,
     g3d_ckpt *ck;
     memset(out, 0, sizeof *out);
     G3D_TRY(g3d_ckpt_open(path, &ck));
-    const cJSON *meta = g3d_ckpt_meta(ck);
-    /* any MoGe generation: the loader then explains what it cannot handle */
-    int is_moge = cJSON_IsObject(cJSON_GetObjectItemCaseSensitive(meta, "model_config"));
     g3d_status rc;
     int is_metric = 1;
-    if (is_moge) {
+    if (g3d_model_recognize(ck) == G3D_MODEL_MOGE) {
         g3d_moge *m = NULL;
         rc = g3d_moge_load(ck, &m);
         if (rc == G3D_OK) rc = g3d_moge_estimator(m, o->num_tokens, out);
