@@ -171,7 +171,7 @@ TEST(estimator_metric_depth_and_intrinsics)
     CHECK_OK(g3d_ckpt_read_alloc(act, "infer.depth", 0, NULL, &ref));
     CHECK_OK(g3d_ckpt_read_alloc(act, "infer.intrinsics", 0, NULL, &Kref));
     g3d_depth_estimator est = {0};
-    CHECK_OK(g3d_moge_estimator(m, TOKENS, &est));
+    CHECK_OK(g3d_depth_estimator_moge_create(m, TOKENS, &est));
     g3d_intrinsics K = {0};
     CHECK_OK(est.estimate(est.ctx, &rgb, NULL, NULL, &d1, &K));
     if (d1.data && ref && Kref) {
@@ -215,7 +215,7 @@ TEST(estimator_metric_depth_and_intrinsics)
         CHECK(fabs(c) < 0.01 * mean);
         CHECK(spread < 1e-5 * mean);
     }
-    est.free(est.ctx);
+    g3d_depth_estimator_free(&est);
     g3d_image_free(&rgb);
     g3d_image_free(&d1);
     g3d_image_free(&d2);

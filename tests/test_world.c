@@ -3,6 +3,7 @@
 #include "gen3d/depth_complete.h"
 #include "gen3d/inpaint_classic.h"
 #include "gen3d/procscene.h"
+#include "gen3d/regions.h"
 #include "gen3d/trajectory.h"
 #include "gen3d/world.h"
 
@@ -18,20 +19,23 @@ static g3d_status run_world(const g3d_frame *f, uint64_t seed, g3d_world *w)
 {
     g3d_mat4 *poses;
     int n;
-    g3d_trajectory_params tp = g3d_trajectory_params_default();
+    g3d_trajectory_params tp;
+    g3d_trajectory_params_default(&tp);
     tp.steps = 3;
     tp.angle_deg = 30;
     g3d_trajectory_make("rotate", &tp, g3d_depth_median(&f->depth), &poses, &n);
     g3d_inpainter ip;
     g3d_mask_provider mp;
-    g3d_depth_estimator de = g3d_depth_estimator_completion();
+    g3d_depth_estimator de;
+    g3d_depth_estimator_completion_create(&de);
     g3d_inpainter_classic_create(NULL, &ip);
-    g3d_mask_provider_regions(NULL, f->cam.K, &mp);
-    g3d_world_params wp = g3d_world_params_default();
+    g3d_mask_provider_regions_create(NULL, f->cam.K, &mp);
+    g3d_world_params wp;
+    g3d_world_params_default(&wp);
     wp.extra_views = 5;
     g3d_status rc = g3d_world_generate(f, poses, n, &ip, &de, &mp, &wp, seed, w);
-    ip.free(ip.ctx);
-    mp.free(mp.ctx);
+    g3d_inpainter_free(&ip);
+    g3d_mask_provider_free(&mp);
     free(poses);
     return rc;
 }
@@ -111,7 +115,8 @@ TEST(bad_trajectories)
     make_frame(&f, 64, 48);
     g3d_world w;
     g3d_inpainter ip;
-    g3d_depth_estimator de = g3d_depth_estimator_completion();
+    g3d_depth_estimator de;
+    g3d_depth_estimator_completion_create(&de);
     g3d_inpainter_classic_create(NULL, &ip);
     /* A pose that turns round to look away from everything the input saw. */
     g3d_mat4 poses[2] = {g3d_mat4_identity(), g3d_pose_yaw_pitch(180, 0, g3d_v3(0, 0, -0.5))};
@@ -120,7 +125,7 @@ TEST(bad_trajectories)
     CHECK_FAILS(g3d_world_generate(&f, poses, 0, &ip, &de, NULL, NULL, 1, &w));
     for (size_t i = 0; i < g3d_image_size(&f.depth); i++) f.depth.data[i] = 0;
     CHECK_FAILS(g3d_world_generate(&f, poses, 1, &ip, &de, NULL, NULL, 1, &w));
-    ip.free(ip.ctx);
+    g3d_inpainter_free(&ip);
     g3d_frame_free(&f);
 }
 

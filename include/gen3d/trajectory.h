@@ -33,7 +33,8 @@ typedef struct g3d_trajectory_params {
     int interp;         /* interpolated poses between keyframes (-1 = preset default) */
 } g3d_trajectory_params;
 
-g3d_trajectory_params g3d_trajectory_params_default(void);
+/* Fills the defaults above. */
+void g3d_trajectory_params_default(g3d_trajectory_params *p);
 
 /* Builds the named preset. scene_scale: the scene's median depth in metres (> 0).
  * *poses is malloc'd (caller frees), *n its length. Unknown names are G3D_ERR_ARG with the

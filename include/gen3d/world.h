@@ -28,12 +28,13 @@ extern "C" {
 typedef struct g3d_world_params {
     int extra_views;             /* M: extra training views (10) */
     double extra_angle_deg;      /* their orbit angle about a pivot at the median depth (5) */
-    g3d_render_params render;
+    g3d_cloud_render_params render;
     g3d_align_params align;
     g3d_layers_params layers;
     g3d_progress progress;       /* stage "world": step per pose */
 } g3d_world_params;
-g3d_world_params g3d_world_params_default(void);
+/* Fills the defaults above. */
+void g3d_world_params_default(g3d_world_params *p);
 
 /* What one step did (step 0 is the input). */
 typedef struct g3d_world_step {

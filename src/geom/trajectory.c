@@ -27,10 +27,9 @@ const char *g3d_trajectory_describe(const char *name)
     return NULL;
 }
 
-g3d_trajectory_params g3d_trajectory_params_default(void)
+void g3d_trajectory_params_default(g3d_trajectory_params *p)
 {
-    g3d_trajectory_params p = {0, 0.0, 0.0, -1};
-    return p;
+    *p = (g3d_trajectory_params){0, 0.0, 0.0, -1};
 }
 
 static const g3d_vec3 UP = {0, -1, 0};
@@ -73,7 +72,8 @@ static g3d_mat4 orbit(double yaw_deg, double d)
 g3d_status g3d_trajectory_make(const char *name, const g3d_trajectory_params *p, double scene_scale,
                                g3d_mat4 **poses, int *n)
 {
-    g3d_trajectory_params def = g3d_trajectory_params_default();
+    g3d_trajectory_params def;
+    g3d_trajectory_params_default(&def);
     if (!p) p = &def;
     *poses = NULL;
     *n = 0;
@@ -149,3 +149,4 @@ g3d_status g3d_trajectory_orbits(const g3d_mat4 *poses, int n, int count, double
     *n_out = k;
     return G3D_OK;
 }
+

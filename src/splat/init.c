@@ -1,6 +1,6 @@
 /* Initial Gaussians from a point cloud; the scale comes from a 3-nearest-neighbour search on a
  * uniform grid (cells of about 2 points each, searched in growing shells). */
-#include "gen3d/raster.h"
+#include "gen3d/init.h"
 
 #include <float.h>
 #include <math.h>
@@ -150,3 +150,4 @@ done:
     free(cellof);
     return rc;
 }
+

@@ -290,8 +290,8 @@ g3d_status g3d_train(g3d_gaussians *g, const g3d_train_view *views, int nviews,
         drgb = g3d_calloc(npx, 3 * sizeof(float), "render gradient");
         if (!rgb || !drgb) rc = G3D_ERR_NOMEM;
     }
-    g3d_raster_settings rs;
-    g3d_raster_settings_default(&rs);
+    g3d_raster_params rs;
+    g3d_raster_params_default(&rs);
     memcpy(rs.bg, p->bg, sizeof rs.bg);
     int64_t radii_cap = 0;
 

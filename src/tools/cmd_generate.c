@@ -4,6 +4,7 @@
 #include "world_opts.h"
 #include "gen3d/cameras_json.h"
 #include "gen3d/imageio.h"
+#include "gen3d/init.h"
 #include "gen3d/ply.h"
 #include "gen3d/raster.h"
 #include "gen3d/render.h"
@@ -95,8 +96,8 @@ static g3d_status write_cameras(const char *tmp)
 static g3d_status write_preview(const char *tmp, const g3d_gaussians *g, const g3d_camera *cam)
 {
     g3d_raster_ws *ws;
-    g3d_raster_settings s;
-    g3d_raster_settings_default(&s);
+    g3d_raster_params s;
+    g3d_raster_params_default(&s);
     g3d_image img;
     g3d_status rc = g3d_image_create(&img, cam->K.width, cam->K.height, 3);
     if (rc != G3D_OK) return rc;
@@ -118,11 +119,11 @@ static g3d_status write_video(const char *tmp, const g3d_gaussians *g, const g3d
     int n = 0;
     g3d_status rc = g3d_render_flythrough(o->video_trajectory, NULL, g, input, 0, o->frames, &cams, &n);
     if (rc != G3D_OK) return rc;
-    g3d_render_opts ro;
-    g3d_render_opts_default(&ro);
+    g3d_render_params ro;
+    g3d_render_params_default(&ro);
     ro.progress = g3d_cli_progress();
-    g3d_render_output out;
-    g3d_render_output_default(&out);
+    g3d_render_output_params out;
+    g3d_render_output_params_default(&out);
     out.frames = 0;
     out.cameras = 0;
     out.video_params.fps = o->fps;

@@ -103,7 +103,8 @@ static int run(int argc, char **argv)
     const char *scene = NULL, *trajectory = "swing", *background = "0,0,0";
     int width = 512, height = 384, fps = 30, crf = 18, frames = 0, depth = 0, no_video = 0, sh_degree = -1;
     double fov = 60.0, scale = 0.0;
-    g3d_trajectory_params tp = g3d_trajectory_params_default();
+    g3d_trajectory_params tp;
+    g3d_trajectory_params_default(&tp);
     g3d_opt opts[] = {
         {0, "scene", G3D_OPT_STRING, &scene, "FILE", "scene to render (.ply 3DGS layout or .spz)"},
         {0, "trajectory", G3D_OPT_STRING, &trajectory, "NAME|FILE", "preset name, or transforms.json / cameras.json"},
@@ -167,14 +168,14 @@ static int run(int argc, char **argv)
         }
     }
     if (rc == G3D_OK) rc = g3d_atomic_dir_begin(common.output, &tmp);
-    g3d_render_opts p;
-    g3d_render_opts_default(&p);
+    g3d_render_params p;
+    g3d_render_params_default(&p);
     memcpy(p.background, bg, sizeof bg);
     p.sh_degree = sh_degree;
     p.depth = depth;
     p.progress = g3d_cli_progress();
-    g3d_render_output o;
-    g3d_render_output_default(&o);
+    g3d_render_output_params o;
+    g3d_render_output_params_default(&o);
     o.video = !no_video;
     o.video_params.fps = fps;
     o.video_params.crf = crf;

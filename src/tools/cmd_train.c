@@ -2,6 +2,7 @@
 #include "cli.h"
 #include "gen3d/cameras_json.h"
 #include "gen3d/imageio.h"
+#include "gen3d/init.h"
 #include "gen3d/ply.h"
 #include "gen3d/raster.h"
 #include "gen3d/resize.h"

@@ -30,11 +30,11 @@ g3d_status g3d_cli_input_load(g3d_cli_input *in, g3d_frame *f)
     memset(f, 0, sizeof *f);
     int metric = 0;
     if (in->depth_model && !in->model.estimate) {
-        g3d_depth_model_opts o;
-        g3d_depth_model_opts_default(&o);
+        g3d_depth_model_params o;
+        g3d_depth_model_params_default(&o);
         if (in->max_depth > 0) o.max_depth = in->max_depth;
         o.num_tokens = in->depth_tokens;
-        G3D_TRY(g3d_depth_model_open(in->depth_model, &o, &in->model, &metric));
+        G3D_TRY(g3d_depth_estimator_model_create(in->depth_model, &o, &in->model, &metric));
         g3d_log(G3D_LOG_INFO, "depth model: %s (%s)", in->depth_model, in->model.name);
         if (in->rgb && !in->depth && !metric)
             return G3D_ERR(G3D_ERR_ARG, "%s: relative Depth Anything V2 gives no metres for %s; use MoGe-2 or a "
@@ -60,6 +60,5 @@ const g3d_depth_estimator *g3d_cli_input_model(const g3d_cli_input *in)
 
 void g3d_cli_input_free(g3d_cli_input *in)
 {
-    if (in->model.free) in->model.free(in->model.ctx);
-    memset(&in->model, 0, sizeof in->model);
+    g3d_depth_estimator_free(&in->model);
 }

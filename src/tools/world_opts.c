@@ -3,6 +3,7 @@
 #include "gen3d/cameras_json.h"
 #include "gen3d/depth_complete.h"
 #include "gen3d/inpaint_classic.h"
+#include "gen3d/regions.h"
 #include "gen3d/trajectory.h"
 
 #include <math.h>
@@ -66,7 +67,8 @@ static g3d_status make_poses(const g3d_cli_world *w, const g3d_frame *f, g3d_mat
         }
         g3d_camera_list_free(&l);
     } else {
-        g3d_trajectory_params tp = g3d_trajectory_params_default();
+        g3d_trajectory_params tp;
+        g3d_trajectory_params_default(&tp);
         tp.steps = !strcmp(w->trajectory, "rotate") ? w->steps : 0;
         tp.angle_deg = w->angle;
         tp.distance = w->distance;
@@ -93,12 +95,14 @@ g3d_status g3d_cli_world_run(const g3d_cli_world *w, const g3d_frame *f, const g
     g3d_status rc = make_poses(w, f, &poses, &n);
     g3d_inpainter ip = {0};
     g3d_mask_provider mp = {0};
-    g3d_depth_estimator completion = g3d_depth_estimator_completion();
-    g3d_world_params wp = g3d_world_params_default();
+    g3d_depth_estimator completion;
+    g3d_depth_estimator_completion_create(&completion);
+    g3d_world_params wp;
+    g3d_world_params_default(&wp);
     wp.extra_views = w->extra;
     wp.progress = g3d_cli_progress();
     if (rc == G3D_OK) rc = g3d_inpainter_classic_create(NULL, &ip);
-    if (rc == G3D_OK && !w->no_layers) rc = g3d_mask_provider_regions(NULL, f->cam.K, &mp);
+    if (rc == G3D_OK && !w->no_layers) rc = g3d_mask_provider_regions_create(NULL, f->cam.K, &mp);
     if (rc == G3D_OK) {
         g3d_log(G3D_LOG_INFO, "world: %s, %dx%d, %d poses (%s), %d extra views", f->name, f->rgb.w, f->rgb.h, n,
                 w->trajectory, w->extra);
@@ -108,8 +112,8 @@ g3d_status g3d_cli_world_run(const g3d_cli_world *w, const g3d_frame *f, const g
             g3d_log(G3D_LOG_INFO, "world: %lld points, %d views + %d extra, %d foreground objects, %.1f s",
                     (long long)out->cloud.n, out->n_views, out->n_extra, out->layers.n_foreground, g3d_time_now() - t0);
     }
-    if (ip.free) ip.free(ip.ctx);
-    if (mp.free) mp.free(mp.ctx);
+    g3d_inpainter_free(&ip);
+    g3d_mask_provider_free(&mp);
     free(poses);
     return rc;
 }

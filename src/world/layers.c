@@ -5,10 +5,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-g3d_layers_params g3d_layers_params_default(void)
+void g3d_layers_params_default(g3d_layers_params *p)
 {
-    g3d_layers_params p = {0.85f, 0.005f, 0.60f, 0.35f, 0.3f, 2};
-    return p;
+    *p = (g3d_layers_params){0.85f, 0.005f, 0.60f, 0.35f, 0.3f, 2};
 }
 
 void g3d_layers_free(g3d_layers *l)
@@ -49,7 +48,8 @@ g3d_status g3d_layers_compute(const g3d_image *rgb, const g3d_image *depth, cons
                               const g3d_inpainter *inpaint, const g3d_depth_estimator *depth_fill,
                               const g3d_layers_params *p, uint64_t seed, g3d_layers *out)
 {
-    g3d_layers_params def = g3d_layers_params_default();
+    g3d_layers_params def;
+    g3d_layers_params_default(&def);
     int w = rgb->w, h = rgb->h;
     size_t n = (size_t)w * h;
     memset(out, 0, sizeof *out);

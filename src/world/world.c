@@ -11,16 +11,14 @@
 #include <stdlib.h>
 #include <string.h>
 
-g3d_world_params g3d_world_params_default(void)
+void g3d_world_params_default(g3d_world_params *p)
 {
-    g3d_world_params p;
-    memset(&p, 0, sizeof p);
-    p.extra_views = 10;
-    p.extra_angle_deg = 5.0;
-    p.render = g3d_render_params_default();
-    p.align = g3d_align_params_default();
-    p.layers = g3d_layers_params_default();
-    return p;
+    memset(p, 0, sizeof *p);
+    p->extra_views = 10;
+    p->extra_angle_deg = 5.0;
+    g3d_cloud_render_params_default(&p->render);
+    g3d_align_params_default(&p->align);
+    g3d_layers_params_default(&p->layers);
 }
 
 void g3d_world_free(g3d_world *w)
@@ -125,7 +123,8 @@ g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int
                               const g3d_depth_estimator *depth, const g3d_mask_provider *masks,
                               const g3d_world_params *p, uint64_t seed, g3d_world *out)
 {
-    g3d_world_params def = g3d_world_params_default();
+    g3d_world_params def;
+    g3d_world_params_default(&def);
     if (!p) p = &def;
     memset(out, 0, sizeof *out);
     if (n_poses < 1 || n_poses > 10000) return G3D_ERR(G3D_ERR_ARG, "world: %d poses (need 1..10000)", n_poses);
