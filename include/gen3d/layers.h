@@ -42,6 +42,8 @@ typedef struct g3d_layers {
     float theta_d;
 } g3d_layers;
 void g3d_layers_free(g3d_layers *l);
+/* Deep copy into dst (overwritten, not freed first); on failure dst is left empty. */
+g3d_status g3d_layers_clone(g3d_layers *dst, const g3d_layers *src);
 
 /* Computes the layers of (rgb, depth). masks proposes candidates; inpaint fills the
  * background colour; depth_fill completes the background depth (called with the depth

@@ -2,8 +2,9 @@
  * candidate masks and prompts. Each is a small table of function pointers with a `ctx`.
  *
  * The world loop only sees these tables. Implementations: classical weight-free ones
- * (src/classic), and neural ones (src/models) chosen once by the CLI from the checkpoints
- * given. Every implementation is deterministic for a given seed.
+ * (src/classic), and neural ones (src/models), chosen once per run (g3d_generate, generate.h)
+ * from its parameters or passed in by the caller. Every implementation is deterministic for a
+ * given seed.
  *
  * LIFETIME
  *   An implementation is made by g3d_<kind>_<impl>_create(..., &table) (e.g.

@@ -50,6 +50,21 @@ const char *g3d_trajectory_describe(const char *name);
 /* Pose with the given yaw and pitch (degrees) at position t. */
 g3d_mat4 g3d_pose_yaw_pitch(double yaw_deg, double pitch_deg, g3d_vec3 t);
 
+/* Camera paths from files: cameras.json or transforms.json (cameras_json.h). A trajectory
+ * argument names a file when it contains '/', ends in ".json" or exists; otherwise a preset. */
+int g3d_trajectory_is_file(const char *name);
+
+/* Reads the cameras of a camera file, in order, each with its own intrinsics and image size.
+ * An empty list, an image size outside 1..G3D_MAX_IMAGE_SIDE or a focal length <= 0 is
+ * G3D_ERR_FORMAT naming the file and the frame. *cams is malloc'd (caller frees), *n its
+ * length. */
+g3d_status g3d_trajectory_load(const char *path, g3d_camera **cams, int *n);
+
+/* n_out poses (>= 1) picked from poses[0..n) at evenly spaced indices, rounded to the nearest
+ * (the first and last are kept), e.g. a preset cut to a number of generation steps. *out is
+ * malloc'd (caller frees). */
+g3d_status g3d_trajectory_pick(const g3d_mat4 *poses, int n, int n_out, g3d_mat4 **out);
+
 /* Extra training views around each pose (LucidDreamer's "hemisphere"): per pose, `count`
  * cameras (up to 5) orbiting a pivot `pivot` metres ahead by `angle_deg`: (yaw, pitch) =
  * (a, 0), (0, -a), (0, a), (-a, 0), then (a, a). *out is malloc'd with n * count poses. */

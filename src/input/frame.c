@@ -231,6 +231,35 @@ g3d_status g3d_frame_save(const g3d_frame *f, const char *dir)
     return rc;
 }
 
+void g3d_frame_params_default(g3d_frame_params *p)
+{
+    memset(p, 0, sizeof *p);
+    p->depth_scale = 1000;
+    p->K.cx = p->K.cy = -1;
+    p->default_dir = "cache/default-input";
+}
+
+g3d_status g3d_frame_load(const g3d_frame_params *p, const g3d_depth_estimator *model, g3d_frame *f)
+{
+    g3d_status rc;
+    memset(f, 0, sizeof *f);
+    if (p->max_side < 0) return G3D_ERR(G3D_ERR_ARG, "maximum image side %d is negative", p->max_side);
+    if (p->rgb_path && p->depth_path) {
+        rc = g3d_frame_load_rgbd(p->rgb_path, p->depth_path, p->depth_scale, p->K, p->fov_deg, f);
+    } else if (p->rgb_path) {
+        if (!model) return G3D_ERR(G3D_ERR_ARG, "%s: no depth map, and no depth model to predict one", p->rgb_path);
+        rc = g3d_frame_load_rgb(p->rgb_path, model, p->K, p->fov_deg, p->max_side, f);
+    } else if (p->depth_path) {
+        return G3D_ERR(G3D_ERR_ARG, "%s: a depth map needs its colour image", p->depth_path);
+    } else {
+        rc = g3d_frame_load_middlebury(p->default_dir, f);
+        if (rc != G3D_OK) g3d_error_prefix("default input (run scripts/fetch-default-input.sh)");
+    }
+    if (rc == G3D_OK && p->max_side > 0) rc = g3d_frame_limit_size(f, p->max_side);
+    if (rc != G3D_OK) g3d_frame_free(f);
+    return rc;
+}
+
 /* Resizes img in place to w x h with the given mode. */
 static g3d_status resize_in_place(g3d_image *img, int w, int h, g3d_resize_mode mode)
 {

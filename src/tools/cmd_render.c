@@ -1,6 +1,5 @@
 /* gen3d render: a Gaussian scene rendered along a camera path to frames, depth and a video. */
 #include "cli.h"
-#include "gen3d/cameras_json.h"
 #include "gen3d/ply.h"
 #include "gen3d/render.h"
 #include "gen3d/spz.h"
@@ -64,37 +63,6 @@ static g3d_status load_scene(const char *path, g3d_gaussians *g)
     return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: unknown scene format '.%s' (expected .ply or .spz)", path, ext);
 }
 
-/* A trajectory argument names a file when it looks like a path or exists; else a preset. */
-static int is_file_arg(const char *s)
-{
-    char ext[16];
-    struct stat st;
-    return strchr(s, '/') || !strcmp(g3d_path_ext(s, ext, sizeof ext), "json") || stat(s, &st) == 0;
-}
-
-static g3d_status load_path_file(const char *path, g3d_camera **cams, int *n)
-{
-    g3d_camera_list l;
-    G3D_TRY(g3d_camera_list_load(path, &l));
-    g3d_status rc = G3D_OK;
-    if (l.n < 1) rc = G3D_ERR(G3D_ERR_FORMAT, "%s: the camera list is empty", path);
-    for (int i = 0; i < l.n && rc == G3D_OK; i++) {
-        const g3d_intrinsics K = l.cams[i].K;
-        if (K.width < 1 || K.height < 1 || K.width > G3D_MAX_IMAGE_SIDE || K.height > G3D_MAX_IMAGE_SIDE)
-            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: frame %d: image size %dx%d out of range 1..%d", path, i, K.width,
-                         K.height, G3D_MAX_IMAGE_SIDE);
-        else if (!(K.fx > 0 && K.fy > 0))
-            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: frame %d: focal lengths must be positive", path, i);
-    }
-    if (rc == G3D_OK) {
-        *cams = l.cams;  /* taken over from the list */
-        *n = l.n;
-        l.cams = NULL;
-    }
-    g3d_camera_list_free(&l);
-    return rc;
-}
-
 static int run(int argc, char **argv)
 {
     g3d_cli_common common;
@@ -144,7 +112,7 @@ static int run(int argc, char **argv)
     if (sh_degree < -1 || sh_degree > G3D_SH_MAX_DEGREE) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sh-degree must be in -1..3");
     if (!parse_rgb(background, bg))
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--background must be R,G,B with components in [0, 1], got '%s'", background);
-    const int from_file = is_file_arg(trajectory);
+    const int from_file = g3d_trajectory_is_file(trajectory);
     if (from_file && frames > 0)
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--frames resamples presets; a trajectory file is rendered as given");
     g3d_cli_common_apply(&common);
@@ -159,7 +127,7 @@ static int run(int argc, char **argv)
     if (rc == G3D_OK && g.n == 0) rc = G3D_ERR(G3D_ERR_FORMAT, "%s: the scene holds no Gaussians", scene);
     if (rc == G3D_OK) {
         if (from_file) {
-            rc = load_path_file(trajectory, &cams, &n);
+            rc = g3d_trajectory_load(trajectory, &cams, &n);
         } else {
             g3d_camera input;
             input.K = g3d_intrinsics_from_fov(fov, width, height);

@@ -19,6 +19,18 @@ void g3d_layers_free(g3d_layers *l)
     memset(l, 0, sizeof *l);
 }
 
+g3d_status g3d_layers_clone(g3d_layers *dst, const g3d_layers *src)
+{
+    *dst = *src;
+    dst->fg_mask = dst->bg_rgb = dst->bg_depth = (g3d_image){0};
+    g3d_status rc = G3D_OK;
+    if (src->fg_mask.data) rc = g3d_image_clone(&dst->fg_mask, &src->fg_mask);
+    if (rc == G3D_OK && src->bg_rgb.data) rc = g3d_image_clone(&dst->bg_rgb, &src->bg_rgb);
+    if (rc == G3D_OK && src->bg_depth.data) rc = g3d_image_clone(&dst->bg_depth, &src->bg_depth);
+    if (rc != G3D_OK) g3d_layers_free(dst);
+    return rc;
+}
+
 /* Fraction of the mask's boundary pixels with an outside 4-neighbour more than 5 % deeper. */
 static double occluding_fraction(const uint8_t *mk, const g3d_image *depth)
 {
