@@ -29,8 +29,8 @@ static result run(const g3d_gaussians *g, int W, int H, int reps)
     g3d_camera cam;
     cam.K = g3d_intrinsics_from_fov(60, W, H);
     cam.c2w = g3d_mat4_identity();
-    g3d_raster_settings s;
-    g3d_raster_settings_default(&s);
+    g3d_raster_params s;
+    g3d_raster_params_default(&s);
     size_t np = (size_t)W * H;
     float *rgb = malloc(sizeof(float) * 3 * np), *al = malloc(sizeof(float) * np), *dep = malloc(sizeof(float) * np);
     float *d = malloc(sizeof(float) * 3 * np), *g2d = calloc((size_t)g->n, sizeof(float));

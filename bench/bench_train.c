@@ -27,8 +27,8 @@ static result run(int n, int W, int H, int reps)
     g3d_camera cam;
     cam.K = g3d_intrinsics_from_fov(60, W, H);
     cam.c2w = g3d_mat4_identity();
-    g3d_raster_settings s;
-    g3d_raster_settings_default(&s);
+    g3d_raster_params s;
+    g3d_raster_params_default(&s);
     size_t np = (size_t)W * H;
     g3d_image target, pred, dpred;
     g3d_image_create(&target, W, H, 3);

@@ -4,6 +4,7 @@
 #include "gen3d/depth_complete.h"
 #include "gen3d/inpaint_classic.h"
 #include "gen3d/procscene.h"
+#include "gen3d/regions.h"
 #include "gen3d/trajectory.h"
 #include "gen3d/world.h"
 
@@ -16,26 +17,29 @@ static void bench_frame(const char *label, const g3d_frame *f, const char *traj,
 {
     g3d_mat4 *poses, *p2;
     int n;
-    g3d_trajectory_params tp = g3d_trajectory_params_default();
+    g3d_trajectory_params tp;
+    g3d_trajectory_params_default(&tp);
     tp.steps = steps;
     tp.angle_deg = 20;
     if (g3d_trajectory_make(traj, &tp, g3d_depth_median(&f->depth), &poses, &n) != G3D_OK) return;
-    if (n > steps + 1) { /* resample to steps + 1 poses */
-        p2 = malloc(sizeof(g3d_mat4) * (size_t)(steps + 1));
-        for (int i = 0; i <= steps; i++) p2[i] = poses[(i * (n - 1)) / steps];
+    if (n > steps + 1 && g3d_trajectory_pick(poses, n, steps + 1, &p2) == G3D_OK) {
         free(poses);
         poses = p2;
         n = steps + 1;
     }
     g3d_inpainter ip;
     g3d_mask_provider mp;
-    g3d_depth_estimator de = g3d_depth_estimator_completion();
+    g3d_depth_estimator de;
+    g3d_depth_estimator_completion_create(&de);
     g3d_inpainter_classic_create(NULL, &ip);
-    g3d_mask_provider_regions(NULL, f->cam.K, &mp);
-    g3d_world_params wp = g3d_world_params_default();
+    g3d_mask_provider_regions_create(NULL, f->cam.K, &mp);
+    g3d_world_params wp;
+    g3d_world_params_default(&wp);
     g3d_world w;
+    g3d_layers L;
     double t0 = g3d_time_now();
-    if (g3d_world_generate(f, poses, n, &ip, &de, &mp, &wp, 1, &w) != G3D_OK) {
+    if (g3d_layers_compute(&f->rgb, &f->depth, &mp, &ip, &de, NULL, 1, &L) != G3D_OK ||
+        g3d_world_generate(f, poses, n, &ip, &de, &L, &wp, 1, &w) != G3D_OK) {
         printf("%s: failed: %s\n", label, g3d_error_message());
         return;
     }
@@ -62,8 +66,9 @@ static void bench_frame(const char *label, const g3d_frame *f, const char *traj,
            w.cloud.n / dt / 1e6);
     printf("  final cloud: %lld points\n", (long long)w.cloud.n);
     g3d_world_free(&w);
-    ip.free(ip.ctx);
-    mp.free(mp.ctx);
+    g3d_layers_free(&L);
+    g3d_inpainter_free(&ip);
+    g3d_mask_provider_free(&mp);
     free(poses);
 }
 

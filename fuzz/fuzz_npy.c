@@ -1,5 +1,5 @@
 /* libFuzzer target: the .npy parser (header dictionary, dtype, shape, data size). */
-#include "gen3d/depthio.h"
+#include "gen3d/npy.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {

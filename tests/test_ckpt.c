@@ -1,6 +1,7 @@
 /* Checkpoints: the safetensors reader on the golden weights, every dtype, hostile headers. */
 #include "testutil.h"
 #include "gen3d/ckpt.h"
+#include "gen3d/recognize.h"
 
 #include <cjson/cJSON.h>
 #include <stdint.h>
@@ -37,7 +38,7 @@ static void check_weights(const weights_case *c)
     }
     char arch[256], blocks[32];
     snprintf(blocks, sizeof blocks, "%d blocks", c->blocks);
-    CHECK(g3d_ckpt_arch(ck, arch, sizeof arch) && strstr(arch, c->arch) && strstr(arch, blocks));
+    CHECK(g3d_model_describe(ck, arch, sizeof arch) && strstr(arch, c->arch) && strstr(arch, blocks));
     /* Reading with the right shape works; a wrong shape or name is an error naming it. */
     int64_t qkv_shape[2] = {3 * c->width, c->width}, wrong[2] = {c->width, 3 * c->width};
     float *w = NULL;
@@ -68,7 +69,7 @@ static void check_weights(const weights_case *c)
     for (int i = 0; img && i < c->img_h * c->img_w * 3; i++) ints &= img[i] >= 0 && img[i] <= 255 && img[i] == floorf(img[i]);
     CHECK(ints);
     free(img);
-    CHECK(g3d_ckpt_arch(ck, arch, sizeof arch) == NULL);
+    CHECK(g3d_model_describe(ck, arch, sizeof arch) == NULL);
     g3d_ckpt_free(ck);
 }
 

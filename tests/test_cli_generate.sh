@@ -30,6 +30,17 @@ G3D_FFMPEG="$T/no-ffmpeg" expect 0 "generate without ffmpeg" "$GEN3D" $G -q -o "
 expect 0 "generate again" "$GEN3D" $G -q -o "$T/b"
 cmp -s "$T/a/scene.ply" "$T/b/scene.ply" && ok "same input, seed and threads: same scene" || bad "same input, seed and threads: same scene"
 
+# A stop request (SIGTERM, like Ctrl-C) once the run has claimed its folder: exit 130, nothing left.
+"$GEN3D" $G --iters 100000 -q -o "$T/stopped" >"$T/out" 2>"$T/err" &
+pid=$!
+i=0
+while [ $i -lt 300 ] && ! ls "$T" | grep -q "stopped.tmp-"; do sleep 0.1; i=$((i + 1)); done
+kill -TERM $pid
+wait $pid
+rc=$?
+[ "$rc" = 130 ] && grep -q "interrupted" "$T/err" && ok "a stopped run exits 130" || bad "a stopped run exits 130 (exit $rc)"
+[ ! -e "$T/stopped" ] && ! ls "$T" | grep -q "stopped.tmp-" && ok "a stopped run leaves nothing" || bad "a stopped run leaves nothing"
+
 expect 2 "zero iterations" "$GEN3D" $G --iters 0 -o "$T/never"
 expect 2 "bad SH degree" "$GEN3D" $G --sh-degree 5 -o "$T/never"
 expect 1 "unknown video trajectory" "$GEN3D" $G --video-trajectory elsewhere -o "$T/never"

@@ -255,7 +255,7 @@ TEST(architecture_from_shapes)
     CHECK_OK(g3d_ckpt_open(test_fixture("dav2_tiny.pth"), &ck));
     if (!ck) return;
     char arch[256];
-    CHECK(g3d_ckpt_arch(ck, arch, sizeof arch) != NULL);
+    CHECK(g3d_model_describe(ck, arch, sizeof arch) != NULL);
     printf("  %s\n", arch);
     CHECK(strstr(arch, "4 blocks") && strstr(arch, "width 128") && strstr(arch, "2 attention heads") &&
           strstr(arch, "features 16") && strstr(arch, "16, 32, 48, 64"));

@@ -35,7 +35,7 @@ TEST(aligns_to_known_inverse_depth)
     for (size_t i = 0; i < n; i += 17) known.data[i] = 1.0f / (0.5f * pred[i] + 0.2f);
 
     g3d_depth_estimator est = {0};
-    CHECK_OK(g3d_dav2_estimator(m, SIZE, &est));
+    CHECK_OK(g3d_depth_estimator_dav2_create(m, SIZE, &est));
     CHECK_OK(est.estimate(est.ctx, &rgb, &known, NULL, &out, NULL));
     CHECK(out.w == w && out.h == h && out.c == 1);
     if (out.data) {
@@ -58,7 +58,7 @@ TEST(aligns_to_known_inverse_depth)
     CHECK_FAILS(est.estimate(est.ctx, &rgb, &known, NULL, &out2, NULL));
     CHECK(out2.data == NULL);
 
-    est.free(est.ctx);
+    g3d_depth_estimator_free(&est);
     free(pred);
     g3d_image_free(&rgb), g3d_image_free(&known), g3d_image_free(&out);
     g3d_ckpt_free(act);
@@ -86,7 +86,7 @@ TEST(metric_model_returns_metres)
     float *pred = malloc(sizeof(float) * n);
     CHECK_OK(g3d_dav2_predict(m, rgb.data, w, h, 70, pred, NULL));
     g3d_depth_estimator est = {0};
-    CHECK_OK(g3d_dav2_estimator(m, 70, &est));
+    CHECK_OK(g3d_depth_estimator_dav2_create(m, 70, &est));
     CHECK_OK(est.estimate(est.ctx, &rgb, NULL, NULL, &out, NULL));
     int same = out.data != NULL, in_range = 1;
     for (size_t i = 0; same && i < n; i++) {
@@ -94,7 +94,7 @@ TEST(metric_model_returns_metres)
         in_range &= pred[i] > 0 && pred[i] < 80.0f;
     }
     CHECK(same && in_range);
-    est.free(est.ctx);
+    g3d_depth_estimator_free(&est);
     free(pred);
     g3d_image_free(&rgb), g3d_image_free(&out);
     g3d_ckpt_free(act);
@@ -103,7 +103,7 @@ TEST(metric_model_returns_metres)
 TEST(bad_input_size)
 {
     g3d_depth_estimator est = {0};
-    CHECK_FAILS(g3d_dav2_estimator(NULL, 10, &est));
+    CHECK_FAILS(g3d_depth_estimator_dav2_create(NULL, 10, &est));
 }
 
 int main(void)

@@ -7,7 +7,9 @@
 #include "gen3d/depthio.h"
 #include "gen3d/eval.h"
 #include "gen3d/imageio.h"
+#include "gen3d/init.h"
 #include "gen3d/loss.h"
+#include "gen3d/npy.h"
 #include "gen3d/procscene.h"
 #include "gen3d/raster.h"
 #include "gen3d/render.h"
@@ -70,8 +72,8 @@ static void write_renders(const g3d_gaussians *g, const char *dir, double shift)
     g3d_remove_tree(dir);
     CHECK_OK(g3d_mkdirs(dir));
     frame_out o = {dir, &l};
-    g3d_render_opts ro;
-    g3d_render_opts_default(&ro);
+    g3d_render_params ro;
+    g3d_render_params_default(&ro);
     ro.depth = 1;
     CHECK_OK(g3d_render_path(g, cams, NVIEWS, &ro, save_frame, &o));
     for (int i = 1; i < NVIEWS; i++) l.cams[i].c2w.m[0][3] += shift;

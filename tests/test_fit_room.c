@@ -1,6 +1,7 @@
 /* test_fit_room.c - the fitting benchmark of the splatting stage as a test: Gaussians
  * initialised from the procedural room's ground-truth point cloud, trained on 24 views at
  * 256x256 with the default schedule, must reach 28 dB PSNR on held-out views between them. */
+#include "gen3d/init.h"
 #include "gen3d/loss.h"
 #include "gen3d/ply.h"
 #include "gen3d/procscene.h"
@@ -46,8 +47,8 @@ TEST(room_fit_reaches_28db)
     CHECK_OK(g3d_train(&g, views, NTRAIN, &p, &res));
 
     g3d_raster_ws *ws;
-    g3d_raster_settings s;
-    g3d_raster_settings_default(&s);
+    g3d_raster_params s;
+    g3d_raster_params_default(&s);
     CHECK_OK(g3d_raster_ws_create(&ws));
     double mean = 0, worst = 1e9;
     for (int i = 0; i < NTEST; i++) {

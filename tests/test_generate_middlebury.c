@@ -66,8 +66,8 @@ TEST(generate_at_the_real_right_view)
     g3d_image img;
     g3d_image_create(&img, f.heldout.w, f.heldout.h, 3);
     g3d_raster_ws *ws;
-    g3d_raster_settings s;
-    g3d_raster_settings_default(&s);
+    g3d_raster_params s;
+    g3d_raster_params_default(&s);
     CHECK_OK(g3d_raster_ws_create(&ws));
     CHECK_OK(g3d_raster_fwd(ws, &g, &f.heldout_cam, &s, img.data, NULL, NULL, NULL));
     double psnr = 0, still = 0;

@@ -269,7 +269,7 @@ TEST(provider_and_errors)
     /* A mask leaving too little for one full patch still fills (smooth fallback). */
     CHECK_OK(g3d_inpaint_patchmatch(&im, &m, NULL, 1));
     CHECK(outside_identical(&im, &orig, &m));
-    ip.free(ip.ctx);
+    g3d_inpainter_free(&ip);
     g3d_image_free(&im);
     g3d_image_free(&orig);
     g3d_image_free(&m);

@@ -3,6 +3,7 @@
 #include "gen3d/depthio.h"
 #include "gen3d/frame.h"
 #include "gen3d/imageio.h"
+#include "gen3d/npy.h"
 #include "gen3d/zip.h"
 
 #include <zlib.h>

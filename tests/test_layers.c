@@ -5,6 +5,7 @@
 #include "gen3d/inpaint_classic.h"
 #include "gen3d/layers.h"
 #include "gen3d/procscene.h"
+#include "gen3d/regions.h"
 
 TEST(foreground_matches_near_objects)
 {
@@ -13,8 +14,9 @@ TEST(foreground_matches_near_objects)
     CHECK_OK(g3d_procscene_render(&cam, &rgb, &depth, &ids));
     g3d_mask_provider mp;
     g3d_inpainter ip;
-    g3d_depth_estimator de = g3d_depth_estimator_completion();
-    CHECK_OK(g3d_mask_provider_regions(NULL, cam.K, &mp));
+    g3d_depth_estimator de;
+    g3d_depth_estimator_completion_create(&de);
+    CHECK_OK(g3d_mask_provider_regions_create(NULL, cam.K, &mp));
     CHECK_OK(g3d_inpainter_classic_create(NULL, &ip));
     g3d_layers L;
     CHECK_OK(g3d_layers_compute(&rgb, &depth, &mp, &ip, &de, NULL, 1, &L));
@@ -39,8 +41,8 @@ TEST(foreground_matches_near_objects)
     g3d_image_save_png(test_tmp("layers_fg.png"), &L.fg_mask, 8);
     g3d_image_save_png(test_tmp("layers_bg.png"), &L.bg_rgb, 8);
     g3d_layers_free(&L);
-    mp.free(mp.ctx);
-    ip.free(ip.ctx);
+    g3d_mask_provider_free(&mp);
+    g3d_inpainter_free(&ip);
     g3d_image_free(&rgb); g3d_image_free(&depth); g3d_image_free(&ids);
 }
 

@@ -5,8 +5,8 @@
 #include "golden.h"
 
 #include "gen3d/depth_estimators.h"
-#include "gen3d/depthio.h"
 #include "gen3d/moge.h"
+#include "gen3d/npy.h"
 #include "gen3d/resize.h"
 
 #define GOLDEN "golden/moge2_vits_config/"
@@ -162,7 +162,7 @@ static void check_estimator(golden_set g)
     CHECK_OK(g3d_ckpt_read_alloc(act, "infer.depth", 0, NULL, &ref));
     CHECK_OK(g3d_ckpt_read_alloc(act, "infer.intrinsics", 0, NULL, &Kref));
     g3d_depth_estimator est = {0};
-    CHECK_OK(g3d_moge_estimator(m, g.tokens, &est));
+    CHECK_OK(g3d_depth_estimator_moge_create(m, g.tokens, &est));
     g3d_intrinsics K = {0};
     CHECK_OK(est.estimate(est.ctx, &rgb, NULL, NULL, &d1, &K));
     if (d1.data && ref && Kref) {
@@ -206,7 +206,7 @@ static void check_estimator(golden_set g)
         CHECK(fabs(c) < 0.01 * mean);
         CHECK(spread < 1e-5 * mean);
     }
-    est.free(est.ctx);
+    g3d_depth_estimator_free(&est);
     g3d_image_free(&rgb);
     g3d_image_free(&d1);
     g3d_image_free(&d2);

@@ -1,5 +1,6 @@
 /* Rasterizer tests: forward sanity, culling, determinism, and gradients of every parameter type
  * against central finite differences of an independent double-precision dense forward. */
+#include "gen3d/init.h"
 #include "gen3d/raster.h"
 #include "testutil.h"
 
@@ -21,7 +22,7 @@ typedef struct dmodel { int n, deg; double *means, *ls, *rots, *ol, *sh; } dmode
 /* Dense double forward: every Gaussian is tested at every pixel (the test scenes are one tile,
  * so tile binning cannot change the result), sorted by depth, same thresholds as Inria. Returns
  * sum(wr * rgb + wa * alpha + wd * depth). */
-static double ref_loss(const dmodel *m, const g3d_camera *cam, const g3d_raster_settings *s,
+static double ref_loss(const dmodel *m, const g3d_camera *cam, const g3d_raster_params *s,
                        const double *wr, const double *wa, const double *wd)
 {
     int n = m->n, K = G3D_SH_COEFFS(m->deg);
@@ -161,8 +162,8 @@ static void grad_check(int deg, int antialiased, uint64_t seed)
     random_scene(&g, 5, deg, seed);
     CHECK_OK(g3d_gaussians_create(&gr, g.n, deg));
     g3d_camera cam = test_camera();
-    g3d_raster_settings s;
-    g3d_raster_settings_default(&s);
+    g3d_raster_params s;
+    g3d_raster_params_default(&s);
     s.antialiased = antialiased;
     s.bg[0] = 0.2f; s.bg[1] = 0.5f; s.bg[2] = 0.9f;
     int np = SW * SH;
@@ -235,8 +236,8 @@ TEST(single_isotropic)
     g3d_camera cam;
     cam.K = g3d_intrinsics_make(f, f, 20, 15, 41, 31);
     cam.c2w = g3d_mat4_identity();
-    g3d_raster_settings s;
-    g3d_raster_settings_default(&s);
+    g3d_raster_params s;
+    g3d_raster_params_default(&s);
     s.bg[0] = 0.25f; s.bg[1] = 0.5f; s.bg[2] = 1.0f;
     float rgb[41 * 31 * 3], al[41 * 31], dep[41 * 31];
     int32_t radius;
@@ -271,8 +272,8 @@ TEST(alpha_and_culling)
     g3d_gaussians g;
     random_scene(&g, 5, 1, 7);
     g3d_camera cam = test_camera();
-    g3d_raster_settings s;
-    g3d_raster_settings_default(&s);
+    g3d_raster_params s;
+    g3d_raster_params_default(&s);
     float rgb0[SW * SH * 3], rgb1[SW * SH * 3], al[SW * SH];
     int32_t radii[5];
     g3d_raster_ws *ws;
@@ -328,8 +329,8 @@ TEST(deterministic)
     g3d_camera cam;
     cam.K = g3d_intrinsics_from_fov(60, W, H);
     cam.c2w = g3d_mat4_identity();
-    g3d_raster_settings s;
-    g3d_raster_settings_default(&s);
+    g3d_raster_params s;
+    g3d_raster_params_default(&s);
     size_t np = (size_t)W * H;
     float *rgb[2], *d = malloc(sizeof(float) * 3 * np), *g2d[2];
     for (size_t i = 0; i < 3 * np; i++) d[i] = g3d_rng_float(&rng) - 0.5f;

@@ -55,8 +55,8 @@ static g3d_status compare_frame(void *user, int index, const g3d_camera *cam, co
     CHECK(rgb->w == W && rgb->h == H && rgb->c == 3);
     g3d_raster_ws *ws;
     g3d_raster_ws_create(&ws);
-    g3d_raster_settings s;
-    g3d_raster_settings_default(&s);
+    g3d_raster_params s;
+    g3d_raster_params_default(&s);
     memcpy(s.bg, c->bg, sizeof s.bg);
     float *ref = malloc(sizeof(float) * W * H * 3), *a = malloc(sizeof(float) * W * H),
           *z = malloc(sizeof(float) * W * H);
@@ -89,8 +89,8 @@ TEST(frames_match_rasterizer)
     small_scene(&g, 60);
     g3d_camera cams[2];
     two_cameras(cams);
-    g3d_render_opts p;
-    g3d_render_opts_default(&p);
+    g3d_render_params p;
+    g3d_render_params_default(&p);
     p.depth = 1;
     p.background[0] = 0.2f;
     p.background[2] = 0.9f;
@@ -138,11 +138,11 @@ TEST(output_folder)
     int n = 0;
     CHECK_OK(g3d_render_flythrough("orbit_left", NULL, &g, &input, 0, 6, &cams, &n));
     CHECK(n == 6);
-    g3d_render_opts p;
-    g3d_render_opts_default(&p);
+    g3d_render_params p;
+    g3d_render_params_default(&p);
     p.depth = 1;
-    g3d_render_output o;
-    g3d_render_output_default(&o);
+    g3d_render_output_params o;
+    g3d_render_output_params_default(&o);
 
     char dir[1024];
     snprintf(dir, sizeof dir, "%s", test_tmp("render_out"));
@@ -163,8 +163,8 @@ TEST(output_folder)
     CHECK_OK(g3d_depth_load(sub, 0, &dimg));
     g3d_raster_ws *ws;
     g3d_raster_ws_create(&ws);
-    g3d_raster_settings s;
-    g3d_raster_settings_default(&s);
+    g3d_raster_params s;
+    g3d_raster_params_default(&s);
     const int W = 41, H = 31;
     float *rgb = malloc(sizeof(float) * W * H * 3), *a = malloc(sizeof(float) * W * H), *z = malloc(sizeof(float) * W * H);
     CHECK_OK(g3d_raster_fwd(ws, &g, &cams[3], &s, rgb, a, z, NULL));

@@ -1,6 +1,6 @@
 /* Resampling against references from OpenCV and PyTorch (tests/fixtures/make_resize_fixture.py). */
 #include "testutil.h"
-#include "gen3d/depthio.h"
+#include "gen3d/npy.h"
 #include "gen3d/resize.h"
 
 static const char *FIX = G3D_SOURCE_DIR "/tests/fixtures/resize_ref.npz";

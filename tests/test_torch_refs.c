@@ -2,8 +2,8 @@
  * make_adam_fixture.py): loss terms and autograd gradient, three torch.optim.Adam steps. */
 #include "testutil.h"
 #include "gen3d/adam.h"
-#include "gen3d/depthio.h"
 #include "gen3d/loss.h"
+#include "gen3d/npy.h"
 
 #define FIXDIR G3D_SOURCE_DIR "/tests/fixtures/"
 

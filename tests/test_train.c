@@ -1,6 +1,7 @@
 /* test_train.c - training fits a synthetic Gaussian scene from noisy points, and is
  * deterministic for a fixed seed. */
 #include "gen3d/ckpt.h"
+#include "gen3d/init.h"
 #include "gen3d/loss.h"
 #include "gen3d/ply.h"
 #include "gen3d/raster.h"
@@ -41,8 +42,8 @@ static g3d_camera ring_camera(double angle, double height)
 static void render(const g3d_gaussians *g, const g3d_camera *c, g3d_image *img)
 {
     g3d_raster_ws *ws;
-    g3d_raster_settings s;
-    g3d_raster_settings_default(&s);
+    g3d_raster_params s;
+    g3d_raster_params_default(&s);
     g3d_image_create(img, RES, RES, 3);
     g3d_raster_ws_create(&ws);
     CHECK_OK(g3d_raster_fwd(ws, g, c, &s, img->data, NULL, NULL, NULL));

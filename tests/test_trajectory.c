@@ -26,7 +26,8 @@ TEST(directions)
     g3d_mat4 *p;
     int n;
     /* rotate: counter-clockwise seen from above = turning left (-x) by the full angle. */
-    g3d_trajectory_params tp = g3d_trajectory_params_default();
+    g3d_trajectory_params tp;
+    g3d_trajectory_params_default(&tp);
     tp.steps = 4;
     tp.angle_deg = 40;
     CHECK_OK(g3d_trajectory_make("rotate", &tp, 3.0, &p, &n));
@@ -43,7 +44,7 @@ TEST(directions)
     CHECK_NEAR(p[n - 1].m[2][3], 1.0, 1e-12);
     CHECK_NEAR(p[n / 2].m[2][3], 1.0 * (n / 2) / (n - 1), 1e-9);
     free(p);
-    tp = g3d_trajectory_params_default();
+    g3d_trajectory_params_default(&tp);
     tp.distance = 0.8;
     tp.interp = 0;
     CHECK_OK(g3d_trajectory_make("move_right", &tp, 4.0, &p, &n));
@@ -79,7 +80,8 @@ TEST(orbits_and_errors)
     CHECK_FAILS(g3d_trajectory_make("spiral", NULL, 1.0, &p, &n));
     CHECK(strstr(g3d_error_message(), "orbit_left") != NULL);
     CHECK_FAILS(g3d_trajectory_make("rotate", NULL, 0.0, &p, &n));
-    g3d_trajectory_params tp = g3d_trajectory_params_default();
+    g3d_trajectory_params tp;
+    g3d_trajectory_params_default(&tp);
     tp.steps = 100000;
     CHECK_FAILS(g3d_trajectory_make("rotate", &tp, 1.0, &p, &n));
     CHECK_FAILS(g3d_trajectory_orbits(base, 2, 9, 2.0, 5.0, &o, &n));

@@ -97,8 +97,8 @@ TEST(scene_round_trip)
     g3d_gaussians g;
     random_scene(&g, 3000, 3, 5);
     g3d_camera cam = test_camera();
-    g3d_viewer_opts o;
-    g3d_viewer_opts_default(&o);
+    g3d_viewer_params o;
+    g3d_viewer_params_default(&o);
     o.template_path = write_template("viewer_template.html", TEMPLATE);
     const char *out = test_tmp("viewer_rt.html");
     CHECK_OK(g3d_viewer_write(out, &g, &cam, NULL, 0, &o));
@@ -141,8 +141,8 @@ TEST(description_cameras)
         path[i].c2w.m[0][3] += 0.1 * i;
     }
     g3d_viewer_path paths[1] = {{"generation", path, 3, 2.0}};
-    g3d_viewer_opts o;
-    g3d_viewer_opts_default(&o);
+    g3d_viewer_params o;
+    g3d_viewer_params_default(&o);
     o.template_path = write_template("viewer_template.html", TEMPLATE);
     o.scene_scale = 2.5;
     const char *out = test_tmp("viewer_desc.html");
@@ -199,8 +199,8 @@ TEST(refusals_leave_no_file)
     random_scene(&g, 2000, 3, 9);
     g3d_gaussians_create(&empty, 1, 0);
     g3d_camera cam = test_camera();
-    g3d_viewer_opts o;
-    g3d_viewer_opts_default(&o);
+    g3d_viewer_params o;
+    g3d_viewer_params_default(&o);
     o.template_path = write_template("viewer_template.html", TEMPLATE);
     o.label = "big.ply";
     const char *out = test_tmp("viewer_refused.html");

@@ -150,8 +150,8 @@ static int console_errors(const cJSON *report)
 static double psnr_against(const g3d_image *shot, const g3d_gaussians *g, const g3d_camera *cam, int upside_down)
 {
     g3d_raster_ws *ws = NULL;
-    g3d_raster_settings s;
-    g3d_raster_settings_default(&s);
+    g3d_raster_params s;
+    g3d_raster_params_default(&s);
     g3d_image img;
     g3d_image_create(&img, W, H, 3);
     double psnr = NAN;

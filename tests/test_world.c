@@ -3,6 +3,7 @@
 #include "gen3d/depth_complete.h"
 #include "gen3d/inpaint_classic.h"
 #include "gen3d/procscene.h"
+#include "gen3d/regions.h"
 #include "gen3d/trajectory.h"
 #include "gen3d/world.h"
 
@@ -18,20 +19,26 @@ static g3d_status run_world(const g3d_frame *f, uint64_t seed, g3d_world *w)
 {
     g3d_mat4 *poses;
     int n;
-    g3d_trajectory_params tp = g3d_trajectory_params_default();
+    g3d_trajectory_params tp;
+    g3d_trajectory_params_default(&tp);
     tp.steps = 3;
     tp.angle_deg = 30;
     g3d_trajectory_make("rotate", &tp, g3d_depth_median(&f->depth), &poses, &n);
     g3d_inpainter ip;
     g3d_mask_provider mp;
-    g3d_depth_estimator de = g3d_depth_estimator_completion();
+    g3d_depth_estimator de;
+    g3d_depth_estimator_completion_create(&de);
     g3d_inpainter_classic_create(NULL, &ip);
-    g3d_mask_provider_regions(NULL, f->cam.K, &mp);
-    g3d_world_params wp = g3d_world_params_default();
+    g3d_mask_provider_regions_create(NULL, f->cam.K, &mp);
+    g3d_world_params wp;
+    g3d_world_params_default(&wp);
     wp.extra_views = 5;
-    g3d_status rc = g3d_world_generate(f, poses, n, &ip, &de, &mp, &wp, seed, w);
-    ip.free(ip.ctx);
-    mp.free(mp.ctx);
+    g3d_layers L;
+    g3d_status rc = g3d_layers_compute(&f->rgb, &f->depth, &mp, &ip, &de, NULL, seed, &L);
+    if (rc == G3D_OK) rc = g3d_world_generate(f, poses, n, &ip, &de, &L, &wp, seed, w);
+    g3d_layers_free(&L);
+    g3d_inpainter_free(&ip);
+    g3d_mask_provider_free(&mp);
     free(poses);
     return rc;
 }
@@ -105,13 +112,73 @@ TEST(deterministic_dataset)
     g3d_frame_free(&f);
 }
 
+static double max_abs_diff(const g3d_image *a, const g3d_image *b)
+{
+    if (a->w != b->w || a->h != b->h || a->c != b->c) return INFINITY;
+    double m = 0;
+    for (size_t i = 0; i < g3d_image_size(a); i++) m = fmax(m, fabs((double)a->data[i] - b->data[i]));
+    return m;
+}
+
+TEST(world_folder_round_trip)
+{
+    g3d_frame f;
+    make_frame(&f, 96, 72);
+    g3d_world a, b;
+    CHECK_OK(run_world(&f, 2, &a));
+    if (!a.n_views) return;
+    const char *dir = test_tmp("world_round_trip");
+    CHECK_OK(g3d_world_save(&a, dir, 2));
+    CHECK_OK(g3d_world_load(dir, &b));
+    CHECK(b.n_views == a.n_views && b.n_extra == a.n_extra);
+    if (b.n_views != a.n_views || b.n_extra != a.n_extra) return;
+    /* what the folder keeps comes back: 8-bit colour, exact depth (.npy), cameras, masks */
+    double cam = 0, rgb = 0, depth = 0, mask = 0;
+    for (int i = 0; i < a.n_views; i++) {
+        cam = fmax(cam, g3d_mat4_max_abs_diff(a.cams[i].c2w, b.cams[i].c2w) + fabs(a.cams[i].K.cx - b.cams[i].K.cx) +
+                            fabs(a.cams[i].K.fx - b.cams[i].K.fx));
+        rgb = fmax(rgb, max_abs_diff(&a.rgb[i], &b.rgb[i]));
+        depth = fmax(depth, max_abs_diff(&a.depth[i], &b.depth[i]));
+        CHECK(b.steps[i].points_added == a.steps[i].points_added && b.steps[i].hole_fraction == a.steps[i].hole_fraction &&
+              b.steps[i].align.residual_after == a.steps[i].align.residual_after);
+    }
+    for (int k = 0; k < a.n_extra; k++) {
+        cam = fmax(cam, g3d_mat4_max_abs_diff(a.extra_cams[k].c2w, b.extra_cams[k].c2w));
+        rgb = fmax(rgb, max_abs_diff(&a.extra_rgb[k], &b.extra_rgb[k]));
+        mask = fmax(mask, max_abs_diff(&a.extra_mask[k], &b.extra_mask[k]));
+    }
+    printf("  round trip: cameras %.1e, colour %.4f, depth %.1e m, masks %.1f\n", cam, rgb, depth, mask);
+    CHECK(cam < 1e-9 && rgb <= 0.5 / 255 + 1e-6 && depth == 0 && mask == 0);
+    CHECK(b.cloud.n == a.cloud.n && !memcmp(b.cloud.xyz, a.cloud.xyz, sizeof(float) * 3 * (size_t)a.cloud.n));
+    CHECK(b.layers.n_foreground == a.layers.n_foreground && max_abs_diff(&b.layers.fg_mask, &a.layers.fg_mask) == 0 &&
+          max_abs_diff(&b.layers.bg_depth, &a.layers.bg_depth) <= 0.0005 + 1e-6);
+    /* saved again, the folder is the same bytes */
+    const char *again = test_tmp("world_round_trip_again");
+    CHECK_OK(g3d_world_save(&b, again, 2));
+    const char *files[] = {"cameras.json", "transforms.json", "views/view_001.png", "depth/view_002.npy", "masks/extra_001.png",
+                           "points.ply", "log.json"};
+    for (size_t k = 0; k < sizeof files / sizeof *files; k++) {
+        char pa[1024], pb[1024];
+        snprintf(pa, sizeof pa, "%s/%s", dir, files[k]);
+        snprintf(pb, sizeof pb, "%s/%s", again, files[k]);
+        CHECK_MSG(same_file(pa, pb), "%s changed after loading and saving again", files[k]);
+    }
+    g3d_world_free(&a);
+    g3d_world_free(&b);
+    /* a folder that is not a world: no camera file */
+    CHECK_FAILS(g3d_world_load(test_tmp("no_such_world"), &b));
+    CHECK(strstr(g3d_error_message(), "no transforms.json or cameras.json") != NULL);
+    g3d_frame_free(&f);
+}
+
 TEST(bad_trajectories)
 {
     g3d_frame f;
     make_frame(&f, 64, 48);
     g3d_world w;
     g3d_inpainter ip;
-    g3d_depth_estimator de = g3d_depth_estimator_completion();
+    g3d_depth_estimator de;
+    g3d_depth_estimator_completion_create(&de);
     g3d_inpainter_classic_create(NULL, &ip);
     /* A pose that turns round to look away from everything the input saw. */
     g3d_mat4 poses[2] = {g3d_mat4_identity(), g3d_pose_yaw_pitch(180, 0, g3d_v3(0, 0, -0.5))};
@@ -120,7 +187,7 @@ TEST(bad_trajectories)
     CHECK_FAILS(g3d_world_generate(&f, poses, 0, &ip, &de, NULL, NULL, 1, &w));
     for (size_t i = 0; i < g3d_image_size(&f.depth); i++) f.depth.data[i] = 0;
     CHECK_FAILS(g3d_world_generate(&f, poses, 1, &ip, &de, NULL, NULL, 1, &w));
-    ip.free(ip.ctx);
+    g3d_inpainter_free(&ip);
     g3d_frame_free(&f);
 }
 
@@ -128,6 +195,7 @@ int main(void)
 {
     RUN(grows_the_scene_consistently);
     RUN(deterministic_dataset);
+    RUN(world_folder_round_trip);
     RUN(bad_trajectories);
     return test_summary();
 }

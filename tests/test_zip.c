@@ -1,7 +1,7 @@
 /* ZIP reader: archives built here by a minimal writer (stored, deflated, ZIP64 fields),
  * then hostile variants of them. */
+#include "gen3d/npy.h"
 #include "gen3d/zip.h"
-#include "gen3d/depthio.h"
 #include "testutil.h"
 
 #include <zlib.h>

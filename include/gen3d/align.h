@@ -26,7 +26,8 @@ typedef struct g3d_align_params {
     float outlier_mads;     /* reject |r - median| > this x 1.4826 MAD (3.0) */
     float max_ratio;        /* ignore correspondences whose depths differ by more than this factor (3.0) */
 } g3d_align_params;
-g3d_align_params g3d_align_params_default(void);
+/* Fills the defaults above. */
+void g3d_align_params_default(g3d_align_params *p);
 
 typedef struct g3d_align_stats {
     int64_t correspondences;     /* boundary pixels used */

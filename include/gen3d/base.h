@@ -44,6 +44,7 @@ typedef enum g3d_status {
     G3D_ERR_NOMEM,       /* allocation failed or a size overflowed                  */
     G3D_ERR_MODEL,       /* checkpoint does not match the expected architecture     */
     G3D_ERR_INTERNAL,    /* a bug: an invariant did not hold                        */
+    G3D_CANCELLED,       /* the caller asked the operation to stop (not a failure)  */
     G3D_STATUS_COUNT
 } g3d_status;
 
@@ -120,7 +121,7 @@ void g3d_log(g3d_log_level level, const char *fmt, ...)
  * ------------------------------------------------------------------------------------- */
 /* Called with the stage name, the step just finished (0..total) and the total (0 = unknown).
  * `info` is an optional short status text ("loss 0.031 psnr 24.1"), may be NULL. Returning
- * non-zero asks the operation to stop early (it then returns G3D_ERR_ARG "cancelled"). */
+ * non-zero asks the operation to stop early: it then returns G3D_CANCELLED. */
 typedef int (*g3d_progress_fn)(void *user, const char *stage, int64_t step, int64_t total,
                                const char *info);
 typedef struct g3d_progress {
@@ -131,6 +132,16 @@ typedef struct g3d_progress {
 /* Reports through p if set; returns non-zero when the callback asked to stop. */
 int g3d_progress_report(const g3d_progress *p, const char *stage, int64_t step, int64_t total,
                         const char *info);
+
+/* A cancel request polled by long runs (e.g. set from a signal handler or another thread):
+ * returning non-zero stops the run, which then returns G3D_CANCELLED. A NULL fn never cancels. */
+typedef struct g3d_cancel {
+    int (*fn)(void *user);
+    void *user;
+} g3d_cancel;
+
+/* 1 when c is set and its callback asks to stop, else 0. */
+int g3d_cancel_requested(const g3d_cancel *c);
 
 /* The terminal reporter: on a TTY it redraws one line "stage  step/total  rate/s  ETA";
  * otherwise it prints a plain line at most every few seconds and at the end of each stage;

@@ -84,10 +84,6 @@ void g3d_dtype_to_f32(g3d_dtype t, const void *src, float *dst, int64_t n);
 /* Total number of elements over all tensors (the parameter count of a state dict). */
 int64_t g3d_ckpt_numel(const g3d_ckpt *ck);
 
-/* The architecture recognised from tensor names and shapes, e.g. "Depth Anything V2 (vits:
- * ViT-S/14, 12 blocks, width 384)", or NULL if unknown. Written into buf. */
-const char *g3d_ckpt_arch(const g3d_ckpt *ck, char *buf, size_t n);
-
 /* Non-tensor content as JSON (safetensors: the __metadata__ object; PyTorch: the unpickled
  * top-level object with every tensor replaced by its name). NULL if there is none. Owned by
  * the checkpoint. */

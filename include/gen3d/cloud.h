@@ -46,16 +46,17 @@ g3d_status g3d_cloud_reserve(g3d_cloud *c, int64_t n);
 g3d_status g3d_cloud_lift(g3d_cloud *c, const g3d_image *rgb, const g3d_image *depth, const g3d_camera *cam,
                           const g3d_image *lift_mask, int32_t view, int64_t *added);
 
-typedef struct g3d_render_params {
+typedef struct g3d_cloud_render_params {
     float depth_tolerance;  /* relative: points within z_min * (1 + tol) are blended (0.02) */
     float footprint_scale;  /* multiplies each point's projected footprint (1.0) */
     int fill_cracks;        /* close one-pixel holes inside one surface (1) */
-} g3d_render_params;
-g3d_render_params g3d_render_params_default(void);
+} g3d_cloud_render_params;
+/* Fills the defaults above. */
+void g3d_cloud_render_params_default(g3d_cloud_render_params *p);
 
 /* Renders the cloud into cam: rgb (h, w, 3), depth (h, w, 1) metres (0 in holes) and mask
  * (h, w, 1) 1 where some point landed. Outputs are created by the call; any may be NULL. */
-g3d_status g3d_cloud_render(const g3d_cloud *c, const g3d_camera *cam, const g3d_render_params *p,
+g3d_status g3d_cloud_render(const g3d_cloud *c, const g3d_camera *cam, const g3d_cloud_render_params *p,
                             g3d_image *rgb, g3d_image *depth, g3d_image *mask);
 
 /* Copies the cloud into a PLY point set (colours rounded to 8 bits). */

@@ -21,8 +21,9 @@ extern "C" {
 g3d_status g3d_depth_complete(g3d_image *depth, const g3d_image *fill_mask);
 
 /* The completion as a depth estimator (providers.h): it needs `known` depth and completes the
- * masked pixels; it cannot estimate depth from colour alone (no known depth = error). */
-g3d_depth_estimator g3d_depth_estimator_completion(void);
+ * masked pixels; it cannot estimate depth from colour alone (no known depth = error). It holds
+ * no state; release with g3d_depth_estimator_free all the same. Cannot fail. */
+g3d_status g3d_depth_estimator_completion_create(g3d_depth_estimator *out);
 
 #ifdef __cplusplus
 }

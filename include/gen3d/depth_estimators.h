@@ -26,32 +26,34 @@ extern "C" {
 #endif
 
 /* Fills *out with an estimator running `model` at `input_size` (518 as trained; must be at
- * least 14). The estimator takes ownership of model: out->free(out->ctx) releases it (also
- * on failure of this call, model is freed). Concurrent estimate() calls on one table are
- * safe (the model is immutable). */
-g3d_status g3d_dav2_estimator(g3d_dav2 *model, int input_size, g3d_depth_estimator *out);
+ * least 14). The estimator takes ownership of model: g3d_depth_estimator_free releases it
+ * (also on failure of this call, model is freed). Concurrent estimate() calls on one table
+ * are safe (the model is immutable). */
+g3d_status g3d_depth_estimator_dav2_create(g3d_dav2 *model, int input_size, g3d_depth_estimator *out);
 
 /* Fills *out with a MoGe-2 estimator running `model` with num_tokens tokens (<= 0: the model's
  * default). The model must have a metric scale head (G3D_ERR_UNSUPPORTED otherwise). Ownership
- * of model passes to the estimator exactly as for g3d_dav2_estimator. */
-g3d_status g3d_moge_estimator(g3d_moge *model, int num_tokens, g3d_depth_estimator *out);
+ * of model passes to the estimator exactly as for g3d_depth_estimator_dav2_create. */
+g3d_status g3d_depth_estimator_moge_create(g3d_moge *model, int num_tokens, g3d_depth_estimator *out);
 
-typedef struct g3d_depth_model_opts {
+/* How g3d_depth_estimator_model_create runs the model it finds. */
+typedef struct g3d_depth_model_params {
     int input_size;     /* Depth Anything V2 network input size; 518 */
     int num_tokens;     /* MoGe-2 encoder tokens; <= 0: the model's default */
     double max_depth;   /* Depth Anything V2: > 0 metric with this maximum depth (metres), 0
                            relative, < 0 (default) from the file name (g3d_dav2_metric_default) */
-} g3d_depth_model_opts;
+} g3d_depth_model_params;
 
-void g3d_depth_model_opts_default(g3d_depth_model_opts *o);
+/* Fills the defaults above. */
+void g3d_depth_model_params_default(g3d_depth_model_params *p);
 
 /* Opens a depth checkpoint and wraps it as an estimator, the architecture recognised from the
- * content: MoGe-2 (a checkpoint with a model_config) or Depth Anything V2 (any
- * other file, refused with the loader's message naming the tensor when it is not one).
- * *metric (may be NULL) is 1 when the estimator gives metres without known depth (MoGe-2,
- * metric Depth Anything V2). Free with out->free(out->ctx). */
-g3d_status g3d_depth_model_open(const char *path, const g3d_depth_model_opts *o, g3d_depth_estimator *out,
-                                int *metric);
+ * content (recognize.h): MoGe-2, or Depth Anything V2 (any other file, refused with the
+ * loader's message naming the tensor when it is not one). p NULL = defaults. *metric (may be
+ * NULL) is 1 when the estimator gives metres without known depth (MoGe-2, metric Depth
+ * Anything V2). Release with g3d_depth_estimator_free; *out is zeroed on failure. */
+g3d_status g3d_depth_estimator_model_create(const char *path, const g3d_depth_model_params *p, g3d_depth_estimator *out,
+                                            int *metric);
 
 #ifdef __cplusplus
 }

@@ -1,4 +1,4 @@
-/* gen3d/depthio.h - depth maps and numeric arrays on disk.
+/* gen3d/depthio.h - depth maps on disk (numeric arrays in general: npy.h).
  *
  * Every reader returns depth as a 1-channel g3d_image in metres with 0 = invalid: zero,
  * negative, NaN and infinite values in the file all become 0. Errors name the file.
@@ -20,24 +20,6 @@
 #ifdef __cplusplus
 extern "C" {
 #endif
-
-/* A numeric array read from .npy/.npz, converted to float32. */
-typedef struct g3d_array {
-    int ndim;
-    int64_t shape[8];
-    float *data;  /* (prod(shape)) row-major; free with g3d_array_free */
-    int integer;  /* 1 if the file stored integers (uint8/uint16/bool) */
-} g3d_array;
-void g3d_array_free(g3d_array *a);
-
-/* Parses an .npy file image held in memory (`label` names it in messages). */
-g3d_status g3d_npy_parse(const unsigned char *buf, size_t n, const char *label, g3d_array *out);
-g3d_status g3d_npy_load(const char *path, g3d_array *out);
-/* Reads one member of an .npz (member NULL: "arr_0", else the first member). The ".npy"
- * suffix of member names is optional. */
-g3d_status g3d_npz_load(const char *path, const char *member, g3d_array *out);
-/* Writes a float32 array of the given shape as .npy (atomically). */
-g3d_status g3d_npy_save(const char *path, const float *data, int ndim, const int64_t *shape);
 
 /* Loads a depth map by file extension (.png .pfm .npy .npz); `scale` divides the stored
  * values of 16-bit PNG and uint16 NPY (pass 0 for the default of 1000, i.e. millimetres). */

@@ -30,6 +30,30 @@ void g3d_frame_free(g3d_frame *f);
  * intrinsics match the image. `label` names the input in messages. */
 g3d_status g3d_frame_validate(const g3d_frame *f, const char *label);
 
+/* Where a frame comes from (g3d_frame_load): an RGB-D pair, an RGB image whose depth a model
+ * predicts, or the built-in default input. */
+typedef struct g3d_frame_params {
+    const char *rgb_path;     /* colour image; NULL: the default input from default_dir */
+    const char *depth_path;   /* depth map (depthio.h); NULL with rgb_path: the depth model's */
+    double depth_scale;       /* 16-bit PNG / integer depth units per metre (1000: millimetres) */
+    g3d_intrinsics K;         /* K.fx > 0: the focal length (K.fy <= 0: as fx; K.cx, K.cy < 0:
+                                 the image centre); zero with cx = cy = -1 by default */
+    double fov_deg;           /* horizontal field of view when K.fx is not given (0: the model's
+                                 camera, else 60 degrees) */
+    const char *default_dir;  /* folder of the default input ("cache/default-input") */
+    int max_side;             /* > 0: downscale so that the longer side is at most this (the
+                                 depth model predicts at that size), 16 at least; 0: as is */
+} g3d_frame_params;
+
+/* Fills the defaults above. */
+void g3d_frame_params_default(g3d_frame_params *p);
+
+/* Loads the frame p describes: g3d_frame_load_rgbd, g3d_frame_load_rgb with `model` (which
+ * must then be given), or g3d_frame_load_middlebury (its error prefixed with a hint to fetch
+ * the default input), then g3d_frame_limit_size. *f is created by the call. */
+struct g3d_depth_estimator;
+g3d_status g3d_frame_load(const g3d_frame_params *p, const struct g3d_depth_estimator *model, g3d_frame *f);
+
 /* RGB file + depth file (any format of depthio.h; `depth_scale` as in g3d_depth_load) + the
  * camera: K.fx > 0 gives the focal length (K.fy <= 0: same as fx; K.cx, K.cy < 0: the image
  * centre); otherwise fov_deg > 0 gives the horizontal field of view; otherwise 60 degrees is
@@ -45,7 +69,6 @@ g3d_status g3d_frame_load_rgbd(const char *rgb_path, const char *depth_path, dou
  * (MoGe-2), or 60 degrees when it predicts none. The model must give metric depth without
  * known depth (MoGe-2, metric Depth Anything V2); its error is returned, prefixed with the
  * image path. */
-struct g3d_depth_estimator;
 g3d_status g3d_frame_load_rgb(const char *rgb_path, const struct g3d_depth_estimator *model, g3d_intrinsics K,
                               double fov_deg, int max_side, g3d_frame *f);
 /* The built-in default input: Middlebury 2014 "Motorcycle" (the copy that scikit-image ships,
@@ -70,12 +93,6 @@ g3d_status g3d_frame_save(const g3d_frame *f, const char *dir);
  * colour by area averaging, depth by nearest sampling (no invented depths at edges), the
  * intrinsics accordingly; the held-out view likewise. */
 g3d_status g3d_frame_limit_size(g3d_frame *f, int max_side);
-
-#define G3D_MIDDLEBURY_F 994.978
-#define G3D_MIDDLEBURY_CX0 311.193
-#define G3D_MIDDLEBURY_CY 254.877
-#define G3D_MIDDLEBURY_DOFFS 31.086
-#define G3D_MIDDLEBURY_BASELINE_M 0.193001
 
 #ifdef __cplusplus
 }

@@ -43,8 +43,8 @@ g3d_status g3d_inpaint_patchmatch(g3d_image *image, const g3d_image *mask, const
 g3d_status g3d_inpaint_diffusion(g3d_image *image, const g3d_image *mask);
 
 /* Wraps g3d_inpaint_patchmatch as a g3d_inpainter (name "classic"; the prompt is ignored).
- * params: copied; NULL for defaults; invalid ones give G3D_ERR_ARG. out->free releases
- * the context. */
+ * params: copied; NULL for defaults; invalid ones give G3D_ERR_ARG. Release with
+ * g3d_inpainter_free. */
 g3d_status g3d_inpainter_classic_create(const g3d_inpaint_params *params, g3d_inpainter *out);
 
 #ifdef __cplusplus

@@ -1,6 +1,5 @@
 /* gen3d/layers.h - splitting the input into a foreground and a background layer (the Gen3d
- * paper, section 3.1), and the weight-free region proposals it uses without a segmentation
- * model.
+ * paper, section 3.1).
  *
  * Selection (as the paper applies it to SAM masks): keep candidate masks with score >
  * min_score and area within [min_area, max_area] of the image; the foreground is the union
@@ -12,12 +11,8 @@
  * its depth completed behind the foreground, so that moving the camera reveals plausible
  * background rather than holes.
  *
- * Weight-free proposals (g3d_mask_provider_regions): the scene's large planes (floor, walls,
- * ceiling, ground; each explaining at least `min_plane` of the image) are found by RANSAC on
- * the points lifted from depth and set aside as structure; the remaining pixels split into
- * 4-connected components across depth-continuous neighbours, and each component is one
- * proposal. An object resting on the floor is thus cut from it where the floor plane ends,
- * while its own faces stay together.
+ * The candidates come from a mask provider (providers.h): a segmentation model, or the
+ * weight-free region proposals of regions.h.
  */
 #ifndef G3D_LAYERS_H
 #define G3D_LAYERS_H
@@ -28,20 +23,6 @@
 extern "C" {
 #endif
 
-typedef struct g3d_regions_params {
-    float min_plane;      /* a structure plane explains at least this fraction of the image (0.10) */
-    float plane_tol;      /* inlier distance to a plane, relative to depth (0.012) */
-    float jump;           /* neighbours further apart than this fraction of depth are disconnected (0.03) */
-    int max_planes;       /* structure planes to remove at most (6) */
-    int ransac_iters;     /* plane hypotheses per plane (300) */
-    int min_size;         /* smallest proposal in pixels (7) */
-} g3d_regions_params;
-g3d_regions_params g3d_regions_params_default(void);
-
-/* Region proposals as a mask provider. Needs the camera intrinsics (for normals); K is
- * copied. params NULL = defaults. Free with provider.free(provider.ctx). */
-g3d_status g3d_mask_provider_regions(const g3d_regions_params *params, g3d_intrinsics K, g3d_mask_provider *out);
-
 typedef struct g3d_layers_params {
     float min_score;      /* 0.85 (SAM's predicted IoU threshold in the paper) */
     float min_area;       /* 0.005 of the image */
@@ -50,7 +31,8 @@ typedef struct g3d_layers_params {
     float min_occluding;  /* fraction of the boundary that must occlude something (0.3) */
     int dilate;           /* grow the foreground by this many pixels before inpainting (2) */
 } g3d_layers_params;
-g3d_layers_params g3d_layers_params_default(void);
+/* Fills the defaults above. */
+void g3d_layers_params_default(g3d_layers_params *p);
 
 typedef struct g3d_layers {
     g3d_image fg_mask;    /* (h, w, 1) 1 = foreground */
@@ -60,6 +42,8 @@ typedef struct g3d_layers {
     float theta_d;
 } g3d_layers;
 void g3d_layers_free(g3d_layers *l);
+/* Deep copy into dst (overwritten, not freed first); on failure dst is left empty. */
+g3d_status g3d_layers_clone(g3d_layers *dst, const g3d_layers *src);
 
 /* Computes the layers of (rgb, depth). masks proposes candidates; inpaint fills the
  * background colour; depth_fill completes the background depth (called with the depth

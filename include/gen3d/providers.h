@@ -2,8 +2,14 @@
  * candidate masks and prompts. Each is a small table of function pointers with a `ctx`.
  *
  * The world loop only sees these tables. Implementations: classical weight-free ones
- * (src/classic), and neural ones (src/models) chosen once by the CLI from the checkpoints
- * given. Every implementation is deterministic for a given seed.
+ * (src/classic), and neural ones (src/models), chosen once per run (g3d_generate, generate.h)
+ * from its parameters or passed in by the caller. Every implementation is deterministic for a
+ * given seed.
+ *
+ * LIFETIME
+ *   An implementation is made by g3d_<kind>_<impl>_create(..., &table) (e.g.
+ *   g3d_inpainter_classic_create) and released by g3d_<kind>_free(&table), which calls the
+ *   table's own `free` hook and zeroes the table. Callers never call the hook themselves.
  */
 #ifndef G3D_PROVIDERS_H
 #define G3D_PROVIDERS_H
@@ -23,8 +29,11 @@ typedef struct g3d_inpainter {
      * left bit-identical. mask: (h, w, 1), 1 = fill. prompt: text or NULL. */
     g3d_status (*inpaint)(void *ctx, g3d_image *image, const g3d_image *mask, const char *prompt,
                           uint64_t seed);
-    void (*free)(void *ctx); /* releases ctx; may be NULL */
+    void (*free)(void *ctx); /* releases ctx; may be NULL (use g3d_inpainter_free) */
 } g3d_inpainter;
+
+/* Releases the inpainter's context and zeroes the table. NULL or zeroed is fine. */
+void g3d_inpainter_free(g3d_inpainter *p);
 
 /* Estimates metric depth (and optionally intrinsics) for an image. */
 typedef struct g3d_depth_estimator {
@@ -39,8 +48,11 @@ typedef struct g3d_depth_estimator {
      * intrinsics fill it when it was unknown. May be NULL. */
     g3d_status (*estimate)(void *ctx, const g3d_image *rgb, const g3d_image *known, const g3d_image *mask,
                            g3d_image *depth_out, g3d_intrinsics *K_io);
-    void (*free)(void *ctx);
+    void (*free)(void *ctx); /* releases ctx; may be NULL (use g3d_depth_estimator_free) */
 } g3d_depth_estimator;
+
+/* Releases the estimator's context and zeroes the table. NULL or zeroed is fine. */
+void g3d_depth_estimator_free(g3d_depth_estimator *p);
 
 /* Proposes candidate object masks with confidence scores (SAM-like). */
 typedef struct g3d_mask_set {
@@ -57,8 +69,11 @@ typedef struct g3d_mask_provider {
     /* rgb (h, w, 3), depth (h, w, 1) metres (0 = invalid). out is filled (caller frees with
      * g3d_mask_set_free). */
     g3d_status (*propose)(void *ctx, const g3d_image *rgb, const g3d_image *depth, g3d_mask_set *out);
-    void (*free)(void *ctx);
+    void (*free)(void *ctx); /* releases ctx; may be NULL (use g3d_mask_provider_free) */
 } g3d_mask_provider;
+
+/* Releases the provider's context and zeroes the table. NULL or zeroed is fine. */
+void g3d_mask_provider_free(g3d_mask_provider *p);
 
 #ifdef __cplusplus
 }

@@ -29,17 +29,17 @@ extern "C" {
 
 #define G3D_RASTER_TILE 16
 
-typedef struct g3d_raster_settings {
+typedef struct g3d_raster_params {
     float bg[3];           /* background colour added as T_final * bg; default black */
     int sh_degree_active;  /* SH degree evaluated, clamped to the model's; -1 = the model's (default) */
     int antialiased;       /* 1: multiply opacity by sqrt(det(S)/det(S + eps2d I)) (gsplat/Mip-Splatting) */
     float near_plane;      /* view z <= near_plane is culled; default 0.01 m */
     float eps2d;           /* screen-space dilation added to the 2D covariance diagonal; default 0.3 px^2 */
     float guard_band;      /* x/z and y/z clamped to guard_band * tan(fov/2) for the Jacobian; default 1.3 */
-} g3d_raster_settings;
+} g3d_raster_params;
 
 /* Fills the defaults listed above. */
-void g3d_raster_settings_default(g3d_raster_settings *s);
+void g3d_raster_params_default(g3d_raster_params *s);
 
 /* Per-frame buffers kept between calls (projected Gaussians, sort keys, tile ranges, final T and
  * last contributor per pixel, gradient scratch). Grows on demand, never shrinks; steady-state
@@ -56,10 +56,10 @@ void g3d_raster_ws_free(g3d_raster_ws *ws);   /* NULL is fine */
  *   depth (H, W)     optional; alpha-weighted view z, metres
  *   radii (N)        optional; screen radius in pixels, 0 = not visible in this view
  * Saves everything the backward pass needs in `ws`; a following g3d_raster_bwd must use the same
- * g, cam and settings unchanged. Errors: G3D_ERR_ARG for bad sizes (W or H < 1 or > 32768),
+ * g, cam and params unchanged. Errors: G3D_ERR_ARG for bad sizes (W or H < 1 or > 32768),
  * G3D_ERR_NOMEM. On failure the outputs are unspecified and the workspace holds no valid frame. */
 g3d_status g3d_raster_fwd(g3d_raster_ws *ws, const g3d_gaussians *g, const g3d_camera *cam,
-                          const g3d_raster_settings *s, float *rgb, float *alpha, float *depth,
+                          const g3d_raster_params *s, float *rgb, float *alpha, float *depth,
                           int32_t *radii);
 
 /* Backward of the last g3d_raster_fwd on this workspace.
@@ -77,17 +77,6 @@ g3d_status g3d_raster_fwd(g3d_raster_ws *ws, const g3d_gaussians *g, const g3d_c
 g3d_status g3d_raster_bwd(g3d_raster_ws *ws, const g3d_gaussians *g, const float *d_rgb,
                           const float *d_alpha, const float *d_depth, g3d_gaussians *grads,
                           float *grad2d);
-
-/* Initial Gaussians from a point cloud (the Inria recipe):
- *   xyz (n, 3) world positions, rgb (n, 3) colours in [0, 1].
- *   mean = xyz; sh DC = (rgb - 0.5) / C0, higher SH = 0; rotation = identity;
- *   opacity = 0.1 (logit stored); log_scale (all three axes) = log(sqrt(max(d2, 1e-7))) with d2 the
- *   mean squared distance to the 3 nearest other points (uniform-grid search, not O(n^2)).
- * `g` is created here (capacity n, degree sh_degree) and owned by the caller (g3d_gaussians_free).
- * n must be >= 1; with fewer than 4 points the available neighbours are used (scale 1e-7 floor
- * when alone). Errors: G3D_ERR_ARG (n < 1, non-finite input), G3D_ERR_NOMEM. */
-g3d_status g3d_gaussians_init_from_points(g3d_gaussians *g, const float *xyz, const float *rgb,
-                                          int64_t n, int sh_degree);
 
 #ifdef __cplusplus
 }

@@ -23,15 +23,15 @@
 extern "C" {
 #endif
 
-typedef struct g3d_render_opts {
+typedef struct g3d_render_params {
     float background[3];    /* RGB in [0, 1] behind the splats; default black */
     int sh_degree;          /* SH degree evaluated, 0..model's; -1 = the model's (default) */
     int depth;              /* 1: also produce depth frames; default 0 */
     float depth_min_alpha;  /* depth is 0 where accumulated alpha is below this; default 0.5 */
     g3d_progress progress;  /* stage "render", one step per frame; may cancel */
-} g3d_render_opts;
+} g3d_render_params;
 
-void g3d_render_opts_default(g3d_render_opts *p);
+void g3d_render_params_default(g3d_render_params *p);
 
 /* Receives frame `index` (0..n-1) seen by `cam`: rgb (H, W, 3) in [0, 1]; depth (H, W)
  * metres or NULL when opts.depth is 0. The images belong to the renderer and are valid
@@ -41,21 +41,21 @@ typedef g3d_status (*g3d_render_frame_fn)(void *user, int index, const g3d_camer
 
 /* Renders the first g->n Gaussians from each of the n cameras (n >= 1), in order, handing each
  * frame to fn. Errors: G3D_ERR_ARG (n < 1, a camera size outside 1..G3D_MAX_IMAGE_SIDE,
- * non-finite intrinsics or pose, sh_degree above the model's, cancelled), G3D_ERR_NOMEM, and
+ * non-finite intrinsics or pose, sh_degree above the model's), G3D_CANCELLED, G3D_ERR_NOMEM, and
  * whatever fn returns. */
 g3d_status g3d_render_path(const g3d_gaussians *g, const g3d_camera *cams, int n,
-                           const g3d_render_opts *p, g3d_render_frame_fn fn, void *user);
+                           const g3d_render_params *p, g3d_render_frame_fn fn, void *user);
 
 /* What g3d_render_to_dir writes into its folder. */
-typedef struct g3d_render_output {
+typedef struct g3d_render_output_params {
     int frames;       /* frames/00000.png, ... (8-bit RGB); default 1 */
     int video;        /* video.mp4 (needs ffmpeg and one size for all cameras); default 1 */
     int cameras;      /* cameras.json: the path, names pointing at the frames (and depth
                          frames); default 1 */
     g3d_video_params video_params;
-} g3d_render_output;
+} g3d_render_output_params;
 
-void g3d_render_output_default(g3d_render_output *o);
+void g3d_render_output_params_default(g3d_render_output_params *o);
 
 typedef struct g3d_render_result {
     int video_written;   /* video.mp4 exists */
@@ -71,7 +71,7 @@ typedef struct g3d_render_result {
  * res may be NULL. Errors: those of g3d_render_path, G3D_ERR_IO (write failures, ffmpeg
  * failing). Files already written stay in dir on failure: abort the whole folder. */
 g3d_status g3d_render_to_dir(const g3d_gaussians *g, const g3d_camera *cams, int n,
-                             const g3d_render_opts *p, const g3d_render_output *o,
+                             const g3d_render_params *p, const g3d_render_output_params *o,
                              const char *dir, g3d_render_result *res);
 
 /* The scene scale used by the moving presets: median view depth (metres) of the Gaussian

@@ -60,7 +60,7 @@ typedef struct g3d_train_result {
 
 /* Trains g in place (it may grow, shrink and be reallocated by densification). Views must
  * have matching sizes (G3D_ERR_MISMATCH naming the view otherwise); nviews >= 1.
- * Returns G3D_ERR_ARG "cancelled" when the progress callback asks to stop (g stays valid).
+ * Returns G3D_CANCELLED when the progress callback asks to stop (g stays valid).
  * Resuming refuses a checkpoint of another view count or seed, or one already at or past
  * p->iterations (G3D_ERR_MISMATCH / G3D_ERR_ARG, naming the file).
  * res may be NULL. */

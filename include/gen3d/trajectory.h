@@ -21,6 +21,7 @@
 #define G3D_TRAJECTORY_H
 
 #include "gen3d/camera.h"
+#include "gen3d/cameras_json.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -33,7 +34,8 @@ typedef struct g3d_trajectory_params {
     int interp;         /* interpolated poses between keyframes (-1 = preset default) */
 } g3d_trajectory_params;
 
-g3d_trajectory_params g3d_trajectory_params_default(void);
+/* Fills the defaults above. */
+void g3d_trajectory_params_default(g3d_trajectory_params *p);
 
 /* Builds the named preset. scene_scale: the scene's median depth in metres (> 0).
  * *poses is malloc'd (caller frees), *n its length. Unknown names are G3D_ERR_ARG with the
@@ -48,6 +50,25 @@ const char *g3d_trajectory_describe(const char *name);
 
 /* Pose with the given yaw and pitch (degrees) at position t. */
 g3d_mat4 g3d_pose_yaw_pitch(double yaw_deg, double pitch_deg, g3d_vec3 t);
+
+/* Camera paths from files: cameras.json or transforms.json (cameras_json.h). A trajectory
+ * argument names a file when it contains '/', ends in ".json" or exists; otherwise a preset. */
+int g3d_trajectory_is_file(const char *name);
+
+/* Reads the cameras of a camera file, in order, each with its own intrinsics and image size.
+ * An empty list, an image size outside 1..G3D_MAX_IMAGE_SIDE or a focal length <= 0 is
+ * G3D_ERR_FORMAT naming the file and the frame. *cams is malloc'd (caller frees), *n its
+ * length. */
+g3d_status g3d_trajectory_load(const char *path, g3d_camera **cams, int *n);
+
+/* The same checks, keeping the whole list (image, depth and mask paths too): *l is created
+ * (caller frees with g3d_camera_list_free). */
+g3d_status g3d_trajectory_load_list(const char *path, g3d_camera_list *l);
+
+/* n_out poses (>= 1) picked from poses[0..n) at evenly spaced indices, rounded to the nearest
+ * (the first and last are kept), e.g. a preset cut to a number of generation steps. *out is
+ * malloc'd (caller frees). */
+g3d_status g3d_trajectory_pick(const g3d_mat4 *poses, int n, int n_out, g3d_mat4 **out);
 
 /* Extra training views around each pose (LucidDreamer's "hemisphere"): per pose, `count`
  * cameras (up to 5) orbiting a pivot `pivot` metres ahead by `angle_deg`: (yaw, pitch) =

@@ -44,16 +44,16 @@ typedef struct g3d_viewer_path {
     double fps;               /* cameras per second when played (poses are blended between) */
 } g3d_viewer_path;
 
-typedef struct g3d_viewer_opts {
+typedef struct g3d_viewer_params {
     const char *template_path;  /* NULL (default): g3d_viewer_find_template */
     const char *label;          /* names the scene in error messages; default "scene" */
     size_t max_scene_bytes;     /* default G3D_VIEWER_MAX_SCENE_BYTES */
     double scene_scale;         /* metres; the orbit distance and flying speed. <= 0 (default):
                                    the median depth in front of the input camera
                                    (g3d_render_scene_scale), or 1 when nothing is in front */
-} g3d_viewer_opts;
+} g3d_viewer_params;
 
-void g3d_viewer_opts_default(g3d_viewer_opts *o);
+void g3d_viewer_params_default(g3d_viewer_params *o);
 
 /* Locates the template (order above). *path is malloc'd (caller frees). Errors:
  * G3D_ERR_UNSUPPORTED when there is none (the viewer was not built), G3D_ERR_IO when
@@ -68,7 +68,7 @@ g3d_status g3d_viewer_find_template(char **path);
  * and what to do), those of g3d_spz_encode, G3D_ERR_FORMAT (a damaged template), G3D_ERR_IO,
  * G3D_ERR_NOMEM. */
 g3d_status g3d_viewer_write(const char *path, const g3d_gaussians *g, const g3d_camera *input,
-                            const g3d_viewer_path *paths, int npaths, const g3d_viewer_opts *o);
+                            const g3d_viewer_path *paths, int npaths, const g3d_viewer_params *o);
 
 /* What gen3d generate writes: dir/viewer.html for a generated scene, with the generation
  * trajectory `views` (views[0] is the input camera) and, when video_trajectory is not NULL,

@@ -8,7 +8,7 @@
 static _Thread_local char g_msg[1024];
 
 static const char *const g_status_names[G3D_STATUS_COUNT] = {
-    "ok", "io", "format", "unsupported", "argument", "mismatch", "memory", "model", "internal",
+    "ok", "io", "format", "unsupported", "argument", "mismatch", "memory", "model", "internal", "cancelled",
 };
 
 const char *g3d_status_name(g3d_status s)

@@ -19,6 +19,11 @@ int g3d_progress_report(const g3d_progress *p, const char *stage, int64_t step, 
     return p->fn(p->user, stage, step, total, info);
 }
 
+int g3d_cancel_requested(const g3d_cancel *c)
+{
+    return c && c->fn && c->fn(c->user) != 0;
+}
+
 static void fmt_duration(char *buf, size_t n, double s)
 {
     if (s < 0 || s > 1e7) { snprintf(buf, n, "--"); return; }

@@ -81,8 +81,8 @@ static g3d_status completion_estimate(void *ctx, const g3d_image *rgb, const g3d
     return rc;
 }
 
-g3d_depth_estimator g3d_depth_estimator_completion(void)
+g3d_status g3d_depth_estimator_completion_create(g3d_depth_estimator *out)
 {
-    g3d_depth_estimator e = {"completion", NULL, completion_estimate, NULL};
-    return e;
+    *out = (g3d_depth_estimator){"completion", NULL, completion_estimate, NULL};
+    return G3D_OK;
 }

@@ -1,15 +1,14 @@
 /* Weight-free object proposals: remove the scene's large planes, split the rest into
  * depth-continuous components. */
-#include "gen3d/layers.h"
+#include "gen3d/regions.h"
 
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-g3d_regions_params g3d_regions_params_default(void)
+void g3d_regions_params_default(g3d_regions_params *p)
 {
-    g3d_regions_params p = {0.10f, 0.012f, 0.03f, 6, 300, 7};
-    return p;
+    *p = (g3d_regions_params){0.10f, 0.012f, 0.03f, 6, 300, 7};
 }
 
 typedef struct regions_ctx { g3d_regions_params p; g3d_intrinsics K; } regions_ctx;
@@ -126,11 +125,12 @@ done:
 
 static void regions_free(void *ctx) { free(ctx); }
 
-g3d_status g3d_mask_provider_regions(const g3d_regions_params *params, g3d_intrinsics K, g3d_mask_provider *out)
+g3d_status g3d_mask_provider_regions_create(const g3d_regions_params *params, g3d_intrinsics K, g3d_mask_provider *out)
 {
     regions_ctx *c = malloc(sizeof *c);
     if (!c) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
-    c->p = params ? *params : g3d_regions_params_default();
+    if (params) c->p = *params;
+    else g3d_regions_params_default(&c->p);
     c->K = K;
     out->name = "regions";
     out->ctx = c;

@@ -282,8 +282,8 @@ g3d_status g3d_eval_run(const g3d_gaussians *scene, const g3d_eval_views *v, con
         g3d_camera *cams = g3d_calloc((size_t)v->n, sizeof *cams, "cameras");
         if (!cams) rc = G3D_ERR_NOMEM;
         for (int i = 0; rc == G3D_OK && i < v->n; i++) cams[i] = v->views[i].cam;
-        g3d_render_opts ro;
-        g3d_render_opts_default(&ro);
+        g3d_render_params ro;
+        g3d_render_params_default(&ro);
         ro.depth = 1;
         if (rc == G3D_OK) rc = g3d_render_path(scene, cams, v->n, &ro, rendered, &x);
         free(cams);

@@ -1,9 +1,11 @@
-/* Camera path presets. */
+/* Camera path presets and camera path files. */
 #include "gen3d/trajectory.h"
+#include "gen3d/cameras_json.h"
 
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 static const char *const g_names[] = {"rotate", "lookdown", "lookaround", "rotate360", "push_in", "pull_out",
                                       "move_left", "move_right", "orbit_left", "orbit_right", "pan_left", "pan_right", NULL};
@@ -27,10 +29,9 @@ const char *g3d_trajectory_describe(const char *name)
     return NULL;
 }
 
-g3d_trajectory_params g3d_trajectory_params_default(void)
+void g3d_trajectory_params_default(g3d_trajectory_params *p)
 {
-    g3d_trajectory_params p = {0, 0.0, 0.0, -1};
-    return p;
+    *p = (g3d_trajectory_params){0, 0.0, 0.0, -1};
 }
 
 static const g3d_vec3 UP = {0, -1, 0};
@@ -73,7 +74,8 @@ static g3d_mat4 orbit(double yaw_deg, double d)
 g3d_status g3d_trajectory_make(const char *name, const g3d_trajectory_params *p, double scene_scale,
                                g3d_mat4 **poses, int *n)
 {
-    g3d_trajectory_params def = g3d_trajectory_params_default();
+    g3d_trajectory_params def;
+    g3d_trajectory_params_default(&def);
     if (!p) p = &def;
     *poses = NULL;
     *n = 0;
@@ -147,5 +149,55 @@ g3d_status g3d_trajectory_orbits(const g3d_mat4 *poses, int n, int count, double
             (*out)[k++] = g3d_mat4_mul(poses[i], r);
         }
     *n_out = k;
+    return G3D_OK;
+}
+
+/* ---- camera path files ----------------------------------------------------------------------- */
+
+int g3d_trajectory_is_file(const char *name)
+{
+    char ext[16];
+    struct stat st;
+    return strchr(name, '/') || !strcmp(g3d_path_ext(name, ext, sizeof ext), "json") || stat(name, &st) == 0;
+}
+
+g3d_status g3d_trajectory_load_list(const char *path, g3d_camera_list *l)
+{
+    G3D_TRY(g3d_camera_list_load(path, l));
+    g3d_status rc = G3D_OK;
+    if (l->n < 1) rc = G3D_ERR(G3D_ERR_FORMAT, "%s: the camera list is empty", path);
+    for (int i = 0; i < l->n && rc == G3D_OK; i++) {
+        const g3d_intrinsics K = l->cams[i].K;
+        if (K.width < 1 || K.height < 1 || K.width > G3D_MAX_IMAGE_SIDE || K.height > G3D_MAX_IMAGE_SIDE)
+            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: frame %d: image size %dx%d out of range 1..%d", path, i, K.width,
+                         K.height, G3D_MAX_IMAGE_SIDE);
+        else if (!(K.fx > 0 && K.fy > 0))
+            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: frame %d: focal lengths must be positive", path, i);
+    }
+    if (rc != G3D_OK) g3d_camera_list_free(l);
+    return rc;
+}
+
+g3d_status g3d_trajectory_load(const char *path, g3d_camera **cams, int *n)
+{
+    g3d_camera_list l;
+    *cams = NULL;
+    *n = 0;
+    G3D_TRY(g3d_trajectory_load_list(path, &l));
+    *cams = l.cams;  /* taken over from the list */
+    *n = l.n;
+    l.cams = NULL;
+    g3d_camera_list_free(&l);
+    return G3D_OK;
+}
+
+g3d_status g3d_trajectory_pick(const g3d_mat4 *poses, int n, int n_out, g3d_mat4 **out)
+{
+    *out = NULL;
+    if (n < 1 || n_out < 1) return G3D_ERR(G3D_ERR_ARG, "picking %d of %d poses", n_out, n);
+    g3d_mat4 *o = g3d_calloc((size_t)n_out, sizeof *o, "poses");
+    if (!o) return G3D_ERR_NOMEM;
+    for (int i = 0; i < n_out; i++) o[i] = poses[n_out > 1 ? (int)lround((double)i * (n - 1) / (n_out - 1)) : 0];
+    *out = o;
     return G3D_OK;
 }

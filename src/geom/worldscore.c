@@ -38,7 +38,8 @@ static g3d_status move_pose(const char *name, size_t len, double speed, g3d_mat4
     }
     memcpy(buf, name, len);
     buf[len] = '\0';
-    g3d_trajectory_params p = g3d_trajectory_params_default();
+    g3d_trajectory_params p;
+    g3d_trajectory_params_default(&p);
     p.distance = speed;
     p.interp = 0;
     g3d_mat4 *poses;

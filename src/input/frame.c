@@ -1,6 +1,7 @@
 /* Building the input frame from files: RGB-D pairs and the Middlebury default input. */
 #include "gen3d/frame.h"
 #include "gen3d/depthio.h"
+#include "gen3d/npy.h"
 #include "gen3d/imageio.h"
 #include "gen3d/cameras_json.h"
 #include "gen3d/ply.h"
@@ -11,6 +12,14 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+
+/* The calibration of Middlebury 2014 "Motorcycle" (calib.txt of the perfect-rectification
+ * pair): focal length, principal points, disparity offset, baseline. */
+#define MIDDLEBURY_F 994.978
+#define MIDDLEBURY_CX0 311.193
+#define MIDDLEBURY_CY 254.877
+#define MIDDLEBURY_DOFFS 31.086
+#define MIDDLEBURY_BASELINE_M 0.193001
 
 void g3d_frame_free(g3d_frame *f)
 {
@@ -147,14 +156,14 @@ g3d_status g3d_frame_load_middlebury(const char *dir, g3d_frame *f)
     }
     if ((rc = g3d_image_create(&f->depth, f->rgb.w, f->rgb.h, 1)) != G3D_OK) goto done;
     memcpy(f->depth.data, disp.data, g3d_image_size(&f->depth) * sizeof(float));
-    g3d_disparity_to_depth(&f->depth, G3D_MIDDLEBURY_F, G3D_MIDDLEBURY_BASELINE_M, G3D_MIDDLEBURY_DOFFS);
+    g3d_disparity_to_depth(&f->depth, MIDDLEBURY_F, MIDDLEBURY_BASELINE_M, MIDDLEBURY_DOFFS);
 
-    f->cam.K = g3d_intrinsics_make(G3D_MIDDLEBURY_F, G3D_MIDDLEBURY_F, G3D_MIDDLEBURY_CX0, G3D_MIDDLEBURY_CY, f->rgb.w, f->rgb.h);
+    f->cam.K = g3d_intrinsics_make(MIDDLEBURY_F, MIDDLEBURY_F, MIDDLEBURY_CX0, MIDDLEBURY_CY, f->rgb.w, f->rgb.h);
     f->cam.c2w = g3d_mat4_identity();
-    f->heldout_cam.K = g3d_intrinsics_make(G3D_MIDDLEBURY_F, G3D_MIDDLEBURY_F, G3D_MIDDLEBURY_CX0 + G3D_MIDDLEBURY_DOFFS,
-                                           G3D_MIDDLEBURY_CY, f->heldout.w, f->heldout.h);
+    f->heldout_cam.K = g3d_intrinsics_make(MIDDLEBURY_F, MIDDLEBURY_F, MIDDLEBURY_CX0 + MIDDLEBURY_DOFFS,
+                                           MIDDLEBURY_CY, f->heldout.w, f->heldout.h);
     f->heldout_cam.c2w = g3d_mat4_identity();
-    f->heldout_cam.c2w.m[0][3] = G3D_MIDDLEBURY_BASELINE_M;
+    f->heldout_cam.c2w.m[0][3] = MIDDLEBURY_BASELINE_M;
     snprintf(f->name, sizeof f->name, "middlebury-motorcycle");
     rc = g3d_frame_validate(f, dir);
 done:
@@ -219,6 +228,35 @@ g3d_status g3d_frame_save(const g3d_frame *f, const char *dir)
     free(tmp);
     g3d_camera_list_free(&cams);
     g3d_points_free(&pts);
+    return rc;
+}
+
+void g3d_frame_params_default(g3d_frame_params *p)
+{
+    memset(p, 0, sizeof *p);
+    p->depth_scale = 1000;
+    p->K.cx = p->K.cy = -1;
+    p->default_dir = "cache/default-input";
+}
+
+g3d_status g3d_frame_load(const g3d_frame_params *p, const g3d_depth_estimator *model, g3d_frame *f)
+{
+    g3d_status rc;
+    memset(f, 0, sizeof *f);
+    if (p->max_side < 0) return G3D_ERR(G3D_ERR_ARG, "maximum image side %d is negative", p->max_side);
+    if (p->rgb_path && p->depth_path) {
+        rc = g3d_frame_load_rgbd(p->rgb_path, p->depth_path, p->depth_scale, p->K, p->fov_deg, f);
+    } else if (p->rgb_path) {
+        if (!model) return G3D_ERR(G3D_ERR_ARG, "%s: no depth map, and no depth model to predict one", p->rgb_path);
+        rc = g3d_frame_load_rgb(p->rgb_path, model, p->K, p->fov_deg, p->max_side, f);
+    } else if (p->depth_path) {
+        return G3D_ERR(G3D_ERR_ARG, "%s: a depth map needs its colour image", p->depth_path);
+    } else {
+        rc = g3d_frame_load_middlebury(p->default_dir, f);
+        if (rc != G3D_OK) g3d_error_prefix("default input (run scripts/fetch-default-input.sh)");
+    }
+    if (rc == G3D_OK && p->max_side > 0) rc = g3d_frame_limit_size(f, p->max_side);
+    if (rc != G3D_OK) g3d_frame_free(f);
     return rc;
 }
 

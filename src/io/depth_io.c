@@ -1,6 +1,7 @@
 /* Depth maps: 16-bit PNG, PFM, NPY/NPZ readers and writers; disparity conversion. */
 #include "gen3d/depthio.h"
 #include "gen3d/imageio.h"
+#include "gen3d/npy.h"
 
 #include <math.h>
 #include <stdlib.h>

@@ -1,5 +1,5 @@
 /* NumPy .npy / .npz arrays: a strict header parser and a float32 writer. */
-#include "gen3d/depthio.h"
+#include "gen3d/npy.h"
 #include "gen3d/zip.h"
 
 #include <math.h>

@@ -16,7 +16,7 @@
 #define SCENE_MARK "@@G3D_SCENE@@"
 #define MAX_TEMPLATE_BYTES ((size_t)64 << 20)
 
-void g3d_viewer_opts_default(g3d_viewer_opts *o)
+void g3d_viewer_params_default(g3d_viewer_params *o)
 {
     memset(o, 0, sizeof *o);
     o->label = "scene";
@@ -179,11 +179,11 @@ static g3d_status write_page(const char *path, const unsigned char *t, size_t tn
 static double megabytes(size_t n) { return (double)n / (1 << 20); }
 
 g3d_status g3d_viewer_write(const char *path, const g3d_gaussians *g, const g3d_camera *input,
-                            const g3d_viewer_path *paths, int npaths, const g3d_viewer_opts *opts)
+                            const g3d_viewer_path *paths, int npaths, const g3d_viewer_params *opts)
 {
-    g3d_viewer_opts o;
+    g3d_viewer_params o;
     if (opts) o = *opts;
-    else g3d_viewer_opts_default(&o);
+    else g3d_viewer_params_default(&o);
     const char *label = o.label ? o.label : "scene";
     if (g->n < 1) return G3D_ERR(G3D_ERR_ARG, "%s: the scene holds no Gaussians, so there is nothing to view", label);
     G3D_TRY(check_camera(input, "input", 0));

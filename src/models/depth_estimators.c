@@ -2,8 +2,8 @@
 #include "gen3d/depth_estimators.h"
 
 #include "gen3d/depthfit.h"
+#include "gen3d/recognize.h"
 
-#include <cjson/cJSON.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -61,7 +61,7 @@ static g3d_status dav2_estimate(void *ctx, const g3d_image *rgb, const g3d_image
     return G3D_OK;
 }
 
-g3d_status g3d_dav2_estimator(g3d_dav2 *model, int input_size, g3d_depth_estimator *out)
+g3d_status g3d_depth_estimator_dav2_create(g3d_dav2 *model, int input_size, g3d_depth_estimator *out)
 {
     if (input_size < 14) {
         g3d_dav2_free(model);
@@ -117,7 +117,7 @@ static g3d_status moge_estimate(void *ctx, const g3d_image *rgb, const g3d_image
     return rc;
 }
 
-g3d_status g3d_moge_estimator(g3d_moge *model, int num_tokens, g3d_depth_estimator *out)
+g3d_status g3d_depth_estimator_moge_create(g3d_moge *model, int num_tokens, g3d_depth_estimator *out)
 {
     if (!g3d_moge_has_scale(model)) {
         g3d_moge_free(model);
@@ -137,36 +137,36 @@ g3d_status g3d_moge_estimator(g3d_moge *model, int num_tokens, g3d_depth_estimat
     return G3D_OK;
 }
 
-void g3d_depth_model_opts_default(g3d_depth_model_opts *o)
+void g3d_depth_model_params_default(g3d_depth_model_params *p)
 {
-    o->input_size = 518;
-    o->num_tokens = 0;
-    o->max_depth = -1;
+    p->input_size = 518;
+    p->num_tokens = 0;
+    p->max_depth = -1;
 }
 
-g3d_status g3d_depth_model_open(const char *path, const g3d_depth_model_opts *o, g3d_depth_estimator *out,
-                                int *metric)
+g3d_status g3d_depth_estimator_model_create(const char *path, const g3d_depth_model_params *p, g3d_depth_estimator *out,
+                                            int *metric)
 {
+    g3d_depth_model_params def;
+    g3d_depth_model_params_default(&def);
+    if (!p) p = &def;
     g3d_ckpt *ck;
     memset(out, 0, sizeof *out);
     G3D_TRY(g3d_ckpt_open(path, &ck));
-    const cJSON *meta = g3d_ckpt_meta(ck);
-    /* any MoGe generation: the loader then explains what it cannot handle */
-    int is_moge = cJSON_IsObject(cJSON_GetObjectItemCaseSensitive(meta, "model_config"));
     g3d_status rc;
     int is_metric = 1;
-    if (is_moge) {
+    if (g3d_model_recognize(ck) == G3D_MODEL_MOGE) {
         g3d_moge *m = NULL;
         rc = g3d_moge_load(ck, &m);
-        if (rc == G3D_OK) rc = g3d_moge_estimator(m, o->num_tokens, out);
+        if (rc == G3D_OK) rc = g3d_depth_estimator_moge_create(m, p->num_tokens, out);
     } else {
         g3d_dav2 *m = NULL;
         rc = g3d_dav2_load(ck, &m);
         if (rc == G3D_OK) {
-            double md = o->max_depth < 0 ? g3d_dav2_metric_default(path) : o->max_depth;
+            double md = p->max_depth < 0 ? g3d_dav2_metric_default(path) : p->max_depth;
             g3d_dav2_set_metric(m, (float)md);
             is_metric = md > 0;
-            rc = g3d_dav2_estimator(m, o->input_size, out);
+            rc = g3d_depth_estimator_dav2_create(m, p->input_size, out);
         }
     }
     g3d_ckpt_free(ck);

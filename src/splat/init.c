@@ -1,6 +1,7 @@
-/* Initial Gaussians from a point cloud; the scale comes from a 3-nearest-neighbour search on a
- * uniform grid (cells of about 2 points each, searched in growing shells). */
-#include "gen3d/raster.h"
+/* Initial Gaussians: from a point cloud, the scale from a 3-nearest-neighbour search on a
+ * uniform grid (cells of about 2 points each, searched in growing shells); or from random
+ * points around the cameras. */
+#include "gen3d/init.h"
 
 #include <float.h>
 #include <math.h>
@@ -148,5 +149,32 @@ done:
     free(gr.start);
     free(gr.idx);
     free(cellof);
+    return rc;
+}
+
+g3d_status g3d_gaussians_init_random(g3d_gaussians *g, const g3d_train_view *views, int nviews, int64_t n,
+                                     int sh_degree, uint64_t seed)
+{
+    if (n < 1 || nviews < 1) return G3D_ERR(G3D_ERR_ARG, "random init: %lld points around %d cameras", (long long)n, nviews);
+    g3d_vec3 c = g3d_v3(0, 0, 0);
+    for (int i = 0; i < nviews; i++) c = g3d_v3_add(c, g3d_mat4_translation(views[i].cam.c2w));
+    c = g3d_v3_scale(c, 1.0 / nviews);
+    double half = 10.0 * g3d_train_scene_extent(views, nviews) / 1.1;
+    float *xyz = g3d_calloc((size_t)n, 3 * sizeof(float), "random points");
+    float *rgb = xyz ? g3d_calloc((size_t)n, 3 * sizeof(float), "random points") : NULL;
+    if (!xyz || !rgb) {
+        free(xyz);
+        return G3D_ERR_NOMEM;
+    }
+    g3d_rng r;
+    g3d_rng_seed(&r, seed, 11);
+    const double cc[3] = {c.x, c.y, c.z};
+    for (int64_t i = 0; i < 3 * n; i++) {
+        xyz[i] = (float)(cc[i % 3] + half * (2.0 * g3d_rng_float(&r) - 1.0));
+        rgb[i] = 0.5f;
+    }
+    g3d_status rc = g3d_gaussians_init_from_points(g, xyz, rgb, n, sh_degree);
+    free(xyz);
+    free(rgb);
     return rc;
 }

@@ -33,7 +33,7 @@ struct g3d_raster_ws {
     int W, H, gx, gy, deg, valid;
     int64_t n, cap_n, cap_inst, cap_pix, cap_tiles, n_inst;
     g3d_camera cam;
-    g3d_raster_settings s;
+    g3d_raster_params s;
     double wr[9], wt[3], campos[3];   /* world-to-camera rotation (row-major) and translation */
     /* per Gaussian */
     /* (N, PK) one 64-byte record per projected Gaussian, everything the blend reads, so each
@@ -57,7 +57,7 @@ struct g3d_raster_ws {
     int32_t *last;      /* (H, W) index inside the tile list of the last contributor, -1 none */
 };
 
-void g3d_raster_settings_default(g3d_raster_settings *s)
+void g3d_raster_params_default(g3d_raster_params *s)
 {
     memset(s, 0, sizeof *s);
     s->sh_degree_active = -1;
@@ -550,7 +550,7 @@ static void blend_tile(g3d_raster_ws *ws, int64_t tile, float *rgb, float *alpha
 }
 
 g3d_status g3d_raster_fwd(g3d_raster_ws *ws, const g3d_gaussians *g, const g3d_camera *cam,
-                          const g3d_raster_settings *s, float *rgb, float *alpha, float *depth,
+                          const g3d_raster_params *s, float *rgb, float *alpha, float *depth,
                           int32_t *radii)
 {
     const int W = cam->K.width, H = cam->K.height;

@@ -11,14 +11,14 @@
 #include <stdlib.h>
 #include <string.h>
 
-void g3d_render_opts_default(g3d_render_opts *p)
+void g3d_render_params_default(g3d_render_params *p)
 {
     memset(p, 0, sizeof *p);
     p->sh_degree = -1;
     p->depth_min_alpha = 0.5f;
 }
 
-void g3d_render_output_default(g3d_render_output *o)
+void g3d_render_output_params_default(g3d_render_output_params *o)
 {
     o->frames = 1;
     o->video = 1;
@@ -41,7 +41,7 @@ static g3d_status check_camera(const g3d_camera *c, int i)
 }
 
 g3d_status g3d_render_path(const g3d_gaussians *g, const g3d_camera *cams, int n,
-                           const g3d_render_opts *p, g3d_render_frame_fn fn, void *user)
+                           const g3d_render_params *p, g3d_render_frame_fn fn, void *user)
 {
     if (n < 1) return G3D_ERR(G3D_ERR_ARG, "render: no cameras");
     if (p->sh_degree > g->sh_degree)
@@ -49,8 +49,8 @@ g3d_status g3d_render_path(const g3d_gaussians *g, const g3d_camera *cams, int n
                        g->sh_degree);
     for (int i = 0; i < n; i++) G3D_TRY(check_camera(&cams[i], i));
 
-    g3d_raster_settings s;
-    g3d_raster_settings_default(&s);
+    g3d_raster_params s;
+    g3d_raster_params_default(&s);
     memcpy(s.bg, p->background, sizeof s.bg);
     s.sh_degree_active = p->sh_degree;
 
@@ -80,7 +80,7 @@ g3d_status g3d_render_path(const g3d_gaussians *g, const g3d_camera *cams, int n
         }
         rc = fn(user, i, c, &rgb, p->depth ? &depth : NULL);
         if (rc == G3D_OK && g3d_progress_report(&p->progress, "render", i + 1, n, NULL))
-            rc = G3D_ERR(G3D_ERR_ARG, "render: cancelled");
+            rc = G3D_ERR(G3D_CANCELLED, "render: cancelled");
     }
     g3d_image_free(&rgb);
     g3d_image_free(&depth);
@@ -149,7 +149,7 @@ static g3d_status write_cameras(const char *dir, const g3d_camera *cams, int n, 
 }
 
 g3d_status g3d_render_to_dir(const g3d_gaussians *g, const g3d_camera *cams, int n,
-                             const g3d_render_opts *p, const g3d_render_output *o,
+                             const g3d_render_params *p, const g3d_render_output_params *o,
                              const char *dir, g3d_render_result *res)
 {
     g3d_render_result r = {0, 0, NULL};
@@ -305,7 +305,8 @@ g3d_status g3d_render_flythrough(const char *name, const g3d_trajectory_params *
         for (int i = 0; i < m; i++) rel[i] = swing_pose(scene_scale, (double)i / m);
         rel[0] = g3d_mat4_identity();
     } else {
-        g3d_trajectory_params def = g3d_trajectory_params_default();
+        g3d_trajectory_params def;
+        g3d_trajectory_params_default(&def);
         rc = g3d_trajectory_make(name, tp ? tp : &def, scene_scale, &rel, &m);
         if (rc == G3D_OK && frames > 0) {
             g3d_mat4 *re = NULL;

@@ -290,8 +290,8 @@ g3d_status g3d_train(g3d_gaussians *g, const g3d_train_view *views, int nviews,
         drgb = g3d_calloc(npx, 3 * sizeof(float), "render gradient");
         if (!rgb || !drgb) rc = G3D_ERR_NOMEM;
     }
-    g3d_raster_settings rs;
-    g3d_raster_settings_default(&rs);
+    g3d_raster_params rs;
+    g3d_raster_params_default(&rs);
     memcpy(rs.bg, p->bg, sizeof rs.bg);
     int64_t radii_cap = 0;
 
@@ -356,7 +356,7 @@ g3d_status g3d_train(g3d_gaussians *g, const g3d_train_view *views, int nviews,
             s.sum_loss = s.sum_psnr = 0;
             s.nsum = 0;
             if (g3d_progress_report(&p->progress, "train", it, p->iterations, info))
-                rc = G3D_ERR(G3D_ERR_ARG, "cancelled");
+                rc = G3D_ERR(G3D_CANCELLED, "training cancelled");
         }
         if (p->checkpoint_path && p->checkpoint_every > 0 && it % p->checkpoint_every == 0 && it < p->iterations) {
             g3d_status crc = save_checkpoint(p->checkpoint_path, g, &s, nviews, p);

@@ -5,6 +5,7 @@
 #include <inttypes.h>
 #include <math.h>
 #include <omp.h>
+#include <signal.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -39,6 +40,36 @@ void g3d_cli_common_apply(g3d_cli_common *c)
 
 g3d_progress g3d_cli_progress(void) { return g_progress; }
 
+static volatile sig_atomic_t g_stop;
+
+static void on_signal(int sig)
+{
+    (void)sig;
+    if (g_stop) _exit(G3D_EXIT_CANCELLED);
+    g_stop = 1;
+}
+
+static int stop_requested(void *user)
+{
+    (void)user;
+    return g_stop != 0;
+}
+
+g3d_cancel g3d_cli_cancel(void)
+{
+    static int installed;
+    if (!installed) {
+        struct sigaction sa;
+        memset(&sa, 0, sizeof sa);
+        sa.sa_handler = on_signal;
+        sigemptyset(&sa.sa_mask);
+        sigaction(SIGINT, &sa, NULL);
+        sigaction(SIGTERM, &sa, NULL);
+        installed = 1;
+    }
+    return (g3d_cancel){stop_requested, NULL};
+}
+
 int g3d_cli_errorf(int code, const char *fmt, ...)
 {
     va_list ap;
@@ -52,6 +83,10 @@ int g3d_cli_errorf(int code, const char *fmt, ...)
 
 int g3d_cli_fail(g3d_status rc)
 {
+    if (rc == G3D_CANCELLED) {
+        fprintf(stderr, "gen3d: interrupted\n");
+        return G3D_EXIT_CANCELLED;
+    }
     const char *m = g3d_error_message();
     return g3d_cli_errorf(G3D_EXIT_FAIL, "%s", m && *m ? m : g3d_status_name(rc));
 }

@@ -5,7 +5,8 @@
  *     const g3d_command g3d_cmd_<name> = {"name", "one-line summary", run_fn};
  * The build generates the command table from the file names.
  *
- * Exit codes: 0 success, 1 the work failed (bad input file, I/O error, ...), 2 usage error.
+ * Exit codes: 0 success, 1 the work failed (bad input file, I/O error, ...), 2 usage error,
+ * 130 interrupted (Ctrl-C; the run stopped cleanly and left no output).
  * Results (paths written) go to stdout; logs and progress to stderr.
  */
 #ifndef G3D_CLI_H
@@ -15,7 +16,7 @@
 
 #include <stdint.h>
 
-enum { G3D_EXIT_OK = 0, G3D_EXIT_FAIL = 1, G3D_EXIT_USAGE = 2 };
+enum { G3D_EXIT_OK = 0, G3D_EXIT_FAIL = 1, G3D_EXIT_USAGE = 2, G3D_EXIT_CANCELLED = 130 };
 
 typedef struct g3d_command {
     const char *name;
@@ -69,7 +70,8 @@ void g3d_cli_common_apply(g3d_cli_common *c);
 int g3d_cli_parse(int argc, char **argv, const g3d_opt *opts, int nopts, const char *usage,
                   const char *description, const char **pos, int max_pos, int *npos);
 
-/* Prints "gen3d: error: <message>" (the thread's last error) and returns G3D_EXIT_FAIL. */
+/* Prints "gen3d: error: <message>" (the thread's last error) and returns G3D_EXIT_FAIL; for
+ * G3D_CANCELLED prints "gen3d: interrupted" and returns G3D_EXIT_CANCELLED. */
 int g3d_cli_fail(g3d_status rc);
 /* Prints "gen3d: error: <formatted message>" and returns `code`. */
 int g3d_cli_errorf(int code, const char *fmt, ...)
@@ -81,6 +83,11 @@ int g3d_cli_errorf(int code, const char *fmt, ...)
 /* The progress reporter for this process (stderr; silent with -q). Valid after
  * g3d_cli_common_apply. */
 g3d_progress g3d_cli_progress(void);
+
+/* A cancel request raised by the first SIGINT (Ctrl-C) or SIGTERM, so that a long run stops at
+ * its next step and removes what it was writing; a second signal ends the process at once.
+ * The handlers are installed by the first call. */
+g3d_cancel g3d_cli_cancel(void);
 
 #define G3D_COUNTOF(a) ((int)(sizeof(a) / sizeof((a)[0])))
 

@@ -5,6 +5,7 @@
 #include "gen3d/depthio.h"
 #include "gen3d/image.h"
 #include "gen3d/imageio.h"
+#include "gen3d/recognize.h"
 
 #include <stdio.h>
 
@@ -48,9 +49,10 @@ static int run(int argc, char **argv)
     if (num_tokens < 0 || num_tokens > G3D_MOGE_MAX_TOKENS)
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--num-tokens must be in 0..%d", G3D_MOGE_MAX_TOKENS);
     g3d_cli_common_apply(&common);
-    if (g3d_cli_depth_is_moge(model) && max_depth > 0)
+    const int is_moge = g3d_model_recognize_file(model) == G3D_MODEL_MOGE;
+    if (is_moge && max_depth > 0)
         return g3d_cli_errorf(G3D_EXIT_USAGE, "%s: --max-depth is for metric Depth Anything V2; MoGe-2 predicts its own scale", model);
-    if (g3d_cli_depth_is_moge(model))
+    if (is_moge)
         return g3d_cli_depth_moge(model, input, common.output, num_tokens, intrinsics_out);
     if (intrinsics_out || num_tokens)
         return g3d_cli_errorf(G3D_EXIT_USAGE, "%s: %s needs a MoGe-2 checkpoint (Depth Anything V2 predicts no camera)",

@@ -2,11 +2,13 @@
 #include "cli.h"
 #include "gen3d/cameras_json.h"
 #include "gen3d/ckpt.h"
-
-#include <cjson/cJSON.h>
 #include "gen3d/depthio.h"
 #include "gen3d/imageio.h"
+#include "gen3d/npy.h"
 #include "gen3d/ply.h"
+#include "gen3d/recognize.h"
+
+#include <cjson/cJSON.h>
 
 #include <math.h>
 #include <stdio.h>
@@ -151,7 +153,7 @@ static int info_checkpoint(const char *path)
     g3d_status rc = g3d_ckpt_open(path, &ck);
     if (rc != G3D_OK) return g3d_cli_fail(rc);
     char arch[160];
-    const char *a = g3d_ckpt_arch(ck, arch, sizeof arch);
+    const char *a = g3d_model_describe(ck, arch, sizeof arch);
     printf("%s: checkpoint, %lld tensors, %lld parameters%s%s\n", path, (long long)g3d_ckpt_count(ck),
            (long long)g3d_ckpt_numel(ck), a ? ", " : "", a ? a : "");
     const cJSON *meta = g3d_ckpt_meta(ck);

@@ -3,8 +3,6 @@
 #include "input_opts.h"
 
 #include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
 
 static const char *DESCRIPTION =
     "Builds the pipeline's input frame and writes it as a folder: rgb.png, depth.png (16-bit\n"
@@ -30,21 +28,15 @@ static int run(int argc, char **argv)
     if ((prc = g3d_cli_input_check(&in)) != 0) return prc;
     g3d_cli_common_apply(&common);
 
-    g3d_frame f;
-    g3d_status rc = g3d_cli_input_load(&in, &f);
-    g3d_cli_input_free(&in);
-    if (rc != G3D_OK) return g3d_cli_fail(rc);
-
-    size_t valid = 0, n = g3d_image_size(&f.depth);
-    double lo = 1e30, hi = 0;
-    for (size_t i = 0; i < n; i++)
-        if (f.depth.data[i] > 0) { valid++; lo = f.depth.data[i] < lo ? f.depth.data[i] : lo; hi = f.depth.data[i] > hi ? f.depth.data[i] : hi; }
-    g3d_log(G3D_LOG_INFO, "input %s: %dx%d, fx %.1f fy %.1f cx %.1f cy %.1f (horizontal fov %.1f deg)", f.name, f.rgb.w,
-            f.rgb.h, f.cam.K.fx, f.cam.K.fy, f.cam.K.cx, f.cam.K.cy, g3d_intrinsics_fov_x_deg(f.cam.K));
-    g3d_log(G3D_LOG_INFO, "depth %.3f .. %.3f m, %.1f %% of pixels valid%s", lo, hi, 100.0 * valid / n,
-            f.heldout.data ? "; a real held-out view is included" : "");
-    rc = g3d_frame_save(&f, common.output);
-    g3d_frame_free(&f);
+    g3d_generate_params p;
+    g3d_generate_params_default(&p);
+    g3d_cli_input_apply(&in, &p);
+    p.input.max_side = 0;   /* the frame at its own size */
+    p.last_stage = G3D_STAGE_INPUT;
+    p.output_dir = common.output;
+    p.progress = g3d_cli_progress();
+    p.cancel = g3d_cli_cancel();
+    g3d_status rc = g3d_generate(&p, NULL);
     if (rc != G3D_OK) return g3d_cli_fail(rc);
     printf("%s\n", common.output);
     return G3D_EXIT_OK;

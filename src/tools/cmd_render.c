@@ -1,5 +1,6 @@
 /* gen3d render: a Gaussian scene rendered along a camera path to frames, depth and a video. */
-#include "scene_opts.h"
+#include "cli.h"
+#include "gen3d/trajectory.h"
 #include "gen3d/render.h"
 #include "gen3d/worldscore.h"
 
@@ -64,7 +65,8 @@ static int run(int argc, char **argv)
     const char *scene = NULL, *trajectory = "swing", *background = "0,0,0";
     int width = 512, height = 384, fps = 30, crf = 18, frames = 0, depth = 0, no_video = 0, sh_degree = -1;
     double fov = 60.0, scale = 0.0, ws_speed = 0.0;
-    g3d_trajectory_params tp = g3d_trajectory_params_default();
+    g3d_trajectory_params tp;
+    g3d_trajectory_params_default(&tp);
     g3d_opt opts[] = {
         {0, "scene", G3D_OPT_STRING, &scene, "FILE", "scene to render (.ply 3DGS layout or .spz)"},
         {0, "trajectory", G3D_OPT_STRING, &trajectory, "NAME|FILE", "preset name, worldscore:MOVE[,MOVE...], or transforms.json / cameras.json"},
@@ -105,7 +107,7 @@ static int run(int argc, char **argv)
     if (!parse_rgb(background, bg))
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--background must be R,G,B with components in [0, 1], got '%s'", background);
     const int worldscore = !strncmp(trajectory, "worldscore:", 11);
-    const int from_file = !worldscore && g3d_cli_is_file_arg(trajectory);
+    const int from_file = !worldscore && g3d_trajectory_is_file(trajectory);
     if (from_file && frames > 0)
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--frames resamples presets; a trajectory file is rendered as given");
     if (worldscore && (frames > 0 || width != 512 || height != 384 || fov != 60.0))
@@ -122,7 +124,7 @@ static int run(int argc, char **argv)
         rc = G3D_ERR(G3D_ERR_ARG, "%s: --sh-degree %d asked for, the scene has SH degree %d", scene, sh_degree, g.sh_degree);
     if (rc == G3D_OK) {
         if (from_file) {
-            rc = g3d_cli_load_camera_path(trajectory, &cams, &n);
+            rc = g3d_trajectory_load(trajectory, &cams, &n);
         } else if (worldscore) {
             g3d_camera input = {g3d_worldscore_intrinsics(), g3d_mat4_identity()};
             if (!(tp.distance > 0) && !(scale > 0)) rc = g3d_render_scene_scale(&g, &input, &scale);
@@ -136,14 +138,14 @@ static int run(int argc, char **argv)
         }
     }
     if (rc == G3D_OK) rc = g3d_atomic_dir_begin(common.output, &tmp);
-    g3d_render_opts p;
-    g3d_render_opts_default(&p);
+    g3d_render_params p;
+    g3d_render_params_default(&p);
     memcpy(p.background, bg, sizeof bg);
     p.sh_degree = sh_degree;
     p.depth = depth;
     p.progress = g3d_cli_progress();
-    g3d_render_output o;
-    g3d_render_output_default(&o);
+    g3d_render_output_params o;
+    g3d_render_output_params_default(&o);
     o.video = !no_video;
     o.video_params.fps = fps;
     o.video_params.crf = crf;

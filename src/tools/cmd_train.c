@@ -1,10 +1,7 @@
 /* gen3d train: optimises 3D Gaussians on a dataset folder of posed images. */
 #include "cli.h"
-#include "gen3d/cameras_json.h"
-#include "gen3d/imageio.h"
-#include "gen3d/ply.h"
-#include "gen3d/raster.h"
-#include "gen3d/resize.h"
+#include "gen3d/dataset.h"
+#include "gen3d/init.h"
 #include "gen3d/spz.h"
 #include "gen3d/train.h"
 
@@ -12,7 +9,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 
 static const char *DESCRIPTION =
     "Trains 3D Gaussians on a dataset folder: a transforms.json (nerfstudio) or cameras.json listing\n"
@@ -26,123 +22,31 @@ static const char *DESCRIPTION =
     "such a file with the same data, seed and settings, ending exactly where an uninterrupted run\n"
     "would.";
 
-typedef struct dataset {
-    g3d_camera_list cams;
-    g3d_image *images, *masks;
-    g3d_train_view *views;
-    int n;
-} dataset;
-
-static void dataset_free(dataset *d)
+/* The training views: every frame, on its mask's pixels where it has one. */
+static g3d_status make_views(const g3d_dataset *d, g3d_train_view **out)
 {
-    for (int i = 0; i < d->n; i++) {
-        if (d->images) g3d_image_free(&d->images[i]);
-        if (d->masks) g3d_image_free(&d->masks[i]);
-    }
-    free(d->images);
-    free(d->masks);
-    free(d->views);
-    g3d_camera_list_free(&d->cams);
-    memset(d, 0, sizeof *d);
-}
-
-static g3d_status load_scaled(const char *dir, const char *rel, int channels, int w, int h, int down, g3d_image *out)
-{
-    char *p = g3d_path_join(dir, rel);
-    if (!p) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
-    g3d_image img = {0};
-    g3d_status rc = g3d_image_load(p, channels, &img);
-    if (rc == G3D_OK && (img.w != w || img.h != h))
-        rc = G3D_ERR(G3D_ERR_MISMATCH, "%s: image is %dx%d but its camera says %dx%d", p, img.w, img.h, w, h);
-    free(p);
-    if (rc != G3D_OK) {
-        g3d_image_free(&img);
-        return rc;
-    }
-    if (down == 1) { *out = img; return G3D_OK; }
-    rc = g3d_image_resize(&img, w / down, h / down, channels == 1 ? G3D_RESIZE_NEAREST : G3D_RESIZE_AREA, out);
-    g3d_image_free(&img);
-    return rc;
-}
-
-static g3d_status dataset_load(const char *dir, int down, dataset *d)
-{
-    memset(d, 0, sizeof *d);
-    char *tj = g3d_path_join(dir, "transforms.json"), *cj = g3d_path_join(dir, "cameras.json");
-    struct stat st;
-    g3d_status rc = !tj || !cj ? G3D_ERR(G3D_ERR_NOMEM, "out of memory")
-                  : stat(tj, &st) == 0 ? g3d_camera_list_load(tj, &d->cams)
-                  : stat(cj, &st) == 0 ? g3d_camera_list_load(cj, &d->cams)
-                                       : G3D_ERR(G3D_ERR_IO, "%s: no transforms.json or cameras.json", dir);
-    free(tj);
-    free(cj);
-    if (rc != G3D_OK) return rc;
-    if (d->cams.n == 0) return G3D_ERR(G3D_ERR_FORMAT, "%s: the camera list is empty", dir);
-    d->images = calloc((size_t)d->cams.n, sizeof *d->images);
-    d->masks = calloc((size_t)d->cams.n, sizeof *d->masks);
-    d->views = calloc((size_t)d->cams.n, sizeof *d->views);
-    if (!d->images || !d->masks || !d->views) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
-    d->n = d->cams.n;
-    for (int i = 0; i < d->n && rc == G3D_OK; i++) {
-        g3d_camera *c = &d->cams.cams[i];
-        if (!d->cams.names[i]) return G3D_ERR(G3D_ERR_FORMAT, "%s: frame %d names no image", dir, i);
-        rc = load_scaled(dir, d->cams.names[i], 3, c->K.width, c->K.height, down, &d->images[i]);
-        if (rc == G3D_OK && d->cams.mask_paths[i])
-            rc = load_scaled(dir, d->cams.mask_paths[i], 1, c->K.width, c->K.height, down, &d->masks[i]);
-        if (down > 1) c->K = g3d_intrinsics_resize(c->K, c->K.width / down, c->K.height / down);
-        d->views[i].cam = *c;
-        d->views[i].image = &d->images[i];
-        d->views[i].mask = d->masks[i].data ? &d->masks[i] : NULL;
-    }
-    return rc;
-}
-
-/* Without a point cloud the model starts from random points, as nerfstudio's splatfacto does:
- * uniform in a cube around the cameras (10x their spread), grey, seeded. */
-static g3d_status random_points(const dataset *d, uint64_t seed, int64_t n, float **xyz, float **rgb)
-{
-    g3d_vec3 c = g3d_v3(0, 0, 0);
-    for (int i = 0; i < d->n; i++) c = g3d_v3_add(c, g3d_mat4_translation(d->views[i].cam.c2w));
-    c = g3d_v3_scale(c, 1.0 / d->n);
-    double half = 10.0 * g3d_train_scene_extent(d->views, d->n) / 1.1;
-    *xyz = malloc(sizeof(float) * 3 * (size_t)n);
-    *rgb = malloc(sizeof(float) * 3 * (size_t)n);
-    if (!*xyz || !*rgb) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
-    g3d_rng r;
-    g3d_rng_seed(&r, seed, 11);
-    const double cc[3] = {c.x, c.y, c.z};
-    for (int64_t i = 0; i < 3 * n; i++) {
-        (*xyz)[i] = (float)(cc[i % 3] + half * (2.0 * g3d_rng_float(&r) - 1.0));
-        (*rgb)[i] = 0.5f;
-    }
+    g3d_train_view *v = g3d_calloc((size_t)d->n, sizeof *v, "training views");
+    if (!v) return G3D_ERR_NOMEM;
+    for (int i = 0; i < d->n; i++)
+        v[i] = (g3d_train_view){d->cams.cams[i], &d->images[i], d->masks[i].data ? &d->masks[i] : NULL};
+    *out = v;
     return G3D_OK;
 }
 
-static g3d_status init_model(const char *dir, const dataset *d, int sh_degree, uint64_t seed, g3d_gaussians *g)
+/* From the dataset's points.ply, else from random points around the cameras. */
+static g3d_status init_model(const char *dir, const g3d_dataset *d, const g3d_train_view *views, int sh_degree,
+                             uint64_t seed, g3d_gaussians *g)
 {
-    char *p = g3d_path_join(dir, "points.ply");
-    if (!p) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
-    struct stat st;
-    if (stat(p, &st) != 0) {
-        g3d_log(G3D_LOG_WARN, "%s: no point cloud; starting from 50000 random points", p);
-        free(p);
-        float *xyz = NULL, *rgb = NULL;
-        g3d_status rc = random_points(d, seed, 50000, &xyz, &rgb);
-        if (rc == G3D_OK) rc = g3d_gaussians_init_from_points(g, xyz, rgb, 50000, sh_degree);
-        free(xyz);
-        free(rgb);
-        return rc;
+    if (d->points.n == 0) {
+        g3d_log(G3D_LOG_WARN, "%s/points.ply: no point cloud; starting from %d random points", dir, G3D_RANDOM_INIT_POINTS);
+        return g3d_gaussians_init_random(g, views, d->n, G3D_RANDOM_INIT_POINTS, sh_degree, seed);
     }
-    g3d_points pts;
-    g3d_status rc = g3d_ply_read_points(p, &pts);
-    free(p);
-    if (rc != G3D_OK) return rc;
-    float *rgb = malloc(sizeof(float) * 3 * (size_t)(pts.n ? pts.n : 1));
-    if (!rgb) { g3d_points_free(&pts); return G3D_ERR(G3D_ERR_NOMEM, "out of memory"); }
-    for (int64_t i = 0; i < 3 * pts.n; i++) rgb[i] = pts.rgb[i] / 255.0f;
-    rc = g3d_gaussians_init_from_points(g, pts.xyz, rgb, pts.n, sh_degree);
+    const g3d_points *pts = &d->points;
+    float *rgb = g3d_calloc((size_t)pts->n, 3 * sizeof(float), "point colours");
+    if (!rgb) return G3D_ERR_NOMEM;
+    for (int64_t i = 0; i < 3 * pts->n; i++) rgb[i] = pts->rgb[i] / 255.0f;
+    g3d_status rc = g3d_gaussians_init_from_points(g, pts->xyz, rgb, pts->n, sh_degree);
     free(rgb);
-    g3d_points_free(&pts);
     return rc;
 }
 
@@ -175,10 +79,12 @@ static int run(int argc, char **argv)
     if (ckpt_every < 0) return g3d_cli_errorf(G3D_EXIT_USAGE, "--checkpoint-every must be >= 0");
     g3d_cli_common_apply(&common);
 
-    dataset d;
+    g3d_dataset d;
+    g3d_train_view *views = NULL;
     g3d_gaussians g = {0};
-    g3d_status rc = dataset_load(data, down, &d);
-    if (rc == G3D_OK && !resume) rc = init_model(data, &d, sh_degree, (uint64_t)common.seed, &g);
+    g3d_status rc = g3d_dataset_load(data, down, &d);
+    if (rc == G3D_OK) rc = make_views(&d, &views);
+    if (rc == G3D_OK && !resume) rc = init_model(data, &d, views, sh_degree, (uint64_t)common.seed, &g);
     size_t olen = strlen(common.output);
     char *ckpt = malloc(olen + 32);
     if (!ckpt) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
@@ -192,7 +98,7 @@ static int run(int argc, char **argv)
     tp.resume_path = resume;
     g3d_train_result res = {0};
     int64_t n0 = g.n;
-    if (rc == G3D_OK) rc = g3d_train(&g, d.views, d.n, &tp, &res);
+    if (rc == G3D_OK) rc = g3d_train(&g, views, d.n, &tp, &res);
     char *tmp = NULL, *p;
     if (rc == G3D_OK) rc = g3d_atomic_dir_begin(common.output, &tmp);
     if (rc == G3D_OK) { p = g3d_path_join(tmp, "scene.ply"); rc = g3d_ply_write_gaussians(p, &g); free(p); }
@@ -225,7 +131,8 @@ static int run(int argc, char **argv)
     if (rc == G3D_OK)
         g3d_log(G3D_LOG_INFO, "train: %d views, %lld -> %lld Gaussians, loss %.4f, PSNR %.2f dB, %.1f s", d.n, (long long)n0,
                 (long long)g.n, res.last_loss, res.last_psnr, res.seconds);
-    dataset_free(&d);
+    free(views);
+    g3d_dataset_free(&d);
     g3d_gaussians_free(&g);
     if (rc != G3D_OK) return g3d_cli_fail(rc);
     printf("%s\n", common.output);

@@ -1,5 +1,6 @@
 /* gen3d view: one self-contained viewer.html for a scene, to open in a web browser. */
-#include "scene_opts.h"
+#include "cli.h"
+#include "gen3d/trajectory.h"
 #include "gen3d/render.h"
 #include "gen3d/viewer.h"
 
@@ -45,7 +46,7 @@ static g3d_status input_cameras(const view_opts *o, g3d_camera **gen, int *n_gen
         return G3D_OK;
     }
     g3d_camera_list l;
-    G3D_TRY(g3d_cli_load_camera_file(o->cameras, &l));
+    G3D_TRY(g3d_trajectory_load_list(o->cameras, &l));
     int n = 0;
     for (int i = 0; i < l.n; i++) n += !l.mask_paths[i];
     g3d_camera *c = g3d_calloc((size_t)(n ? n : l.n), sizeof *c, "cameras");
@@ -65,7 +66,7 @@ static g3d_status video_cameras(const view_opts *o, const g3d_gaussians *g, cons
     *cams = NULL;
     *n = 0;
     if (!strcmp(o->video, "none")) return G3D_OK;
-    if (g3d_cli_is_file_arg(o->video)) return g3d_cli_load_camera_path(o->video, cams, n);
+    if (g3d_trajectory_is_file(o->video)) return g3d_trajectory_load(o->video, cams, n);
     return g3d_render_flythrough(o->video, NULL, g, input, 0, o->frames, cams, n);
 }
 
@@ -118,8 +119,8 @@ static int run(int argc, char **argv)
     int npaths = 0;
     if (o.cameras) paths[npaths++] = (g3d_viewer_path){"generation", gen, n_gen, 1.0};
     if (n_video) paths[npaths++] = (g3d_viewer_path){"video", video, n_video, o.fps};
-    g3d_viewer_opts vo;
-    g3d_viewer_opts_default(&vo);
+    g3d_viewer_params vo;
+    g3d_viewer_params_default(&vo);
     vo.label = scene;
     if (rc == G3D_OK) rc = g3d_viewer_write(common.output, &g, &gen[0], paths, npaths, &vo);
     if (rc == G3D_OK && stat(common.output, &st) == 0)

@@ -43,18 +43,16 @@ static int run(int argc, char **argv)
     if ((prc = g3d_cli_world_check(&wo)) != 0) return prc;
     g3d_cli_common_apply(&common);
 
-    g3d_frame f;
-    in.max_side = wo.max_side;
-    g3d_status rc = g3d_cli_input_load(&in, &f);
-    if (rc == G3D_OK) rc = g3d_frame_limit_size(&f, wo.max_side);
-    g3d_world w;
-    if (rc == G3D_OK) rc = g3d_cli_world_run(&wo, &f, g3d_cli_input_model(&in), (uint64_t)common.seed, &w);
-    if (rc == G3D_OK) {
-        rc = g3d_world_save(&w, common.output, (uint64_t)common.seed);
-        g3d_world_free(&w);
-    }
-    g3d_frame_free(&f);
-    g3d_cli_input_free(&in);
+    g3d_generate_params p;
+    g3d_generate_params_default(&p);
+    g3d_cli_input_apply(&in, &p);
+    g3d_cli_world_apply(&wo, &p);
+    p.last_stage = G3D_STAGE_WORLD;
+    p.output_dir = common.output;
+    p.seed = (uint64_t)common.seed;
+    p.progress = g3d_cli_progress();
+    p.cancel = g3d_cli_cancel();
+    g3d_status rc = g3d_generate(&p, NULL);
     if (rc != G3D_OK) return g3d_cli_fail(rc);
     printf("%s\n", common.output);
     return G3D_EXIT_OK;

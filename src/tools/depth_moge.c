@@ -12,20 +12,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-int g3d_cli_depth_is_moge(const char *path)
-{
-    g3d_ckpt *ck = NULL;
-    if (g3d_ckpt_open(path, &ck) != G3D_OK) {
-        g3d_error_clear();
-        return 0;
-    }
-    const cJSON *meta = g3d_ckpt_meta(ck);
-    /* any MoGe generation: the loader then explains what it cannot handle */
-    int yes = cJSON_IsObject(cJSON_GetObjectItemCaseSensitive(meta, "model_config"));
-    g3d_ckpt_free(ck);
-    return yes;
-}
-
 /* {"width", "height", "fx", "fy", "cx", "cy", "fov_x_deg", "fov_y_deg"}: pixels of the input
  * image, pixel centres at integer coordinates. NULL when out of memory. */
 static char *intrinsics_json(g3d_intrinsics K)

@@ -4,10 +4,6 @@
 
 #include "gen3d/moge.h"   /* G3D_MOGE_MAX_TOKENS for the option check */
 
-/* 1 when `path` opens as a checkpoint carrying a MoGe model_config, else 0 (errors are left
- * for the Depth Anything branch to report). */
-int g3d_cli_depth_is_moge(const char *path);
-
 /* Runs MoGe-2 from checkpoint `model` on image `input`, saves metric depth (0 = invalid) to
  * `output` and, when intrinsics_out is non-NULL, the predicted camera as JSON. num_tokens <= 0:
  * the model's default. Returns a CLI exit code; on failure nothing is left behind. */

@@ -1,14 +1,17 @@
-/* Loading the input frame from the shared input options. */
+/* The shared input options and their mapping onto the pipeline's parameters. */
 #include "input_opts.h"
 
 #include <string.h>
 
 void g3d_cli_input_init(g3d_cli_input *in)
 {
+    g3d_frame_params d;
+    g3d_frame_params_default(&d);
     memset(in, 0, sizeof *in);
-    in->default_dir = "cache/default-input";
-    in->scale = 1000;
-    in->cx = in->cy = -1;
+    in->default_dir = d.default_dir;
+    in->scale = d.depth_scale;
+    in->cx = d.K.cx;
+    in->cy = d.K.cy;
 }
 
 int g3d_cli_input_check(const g3d_cli_input *in)
@@ -25,41 +28,15 @@ int g3d_cli_input_check(const g3d_cli_input *in)
     return 0;
 }
 
-g3d_status g3d_cli_input_load(g3d_cli_input *in, g3d_frame *f)
+void g3d_cli_input_apply(const g3d_cli_input *in, g3d_generate_params *p)
 {
-    memset(f, 0, sizeof *f);
-    int metric = 0;
-    if (in->depth_model && !in->model.estimate) {
-        g3d_depth_model_opts o;
-        g3d_depth_model_opts_default(&o);
-        if (in->max_depth > 0) o.max_depth = in->max_depth;
-        o.num_tokens = in->depth_tokens;
-        G3D_TRY(g3d_depth_model_open(in->depth_model, &o, &in->model, &metric));
-        g3d_log(G3D_LOG_INFO, "depth model: %s (%s)", in->depth_model, in->model.name);
-        if (in->rgb && !in->depth && !metric)
-            return G3D_ERR(G3D_ERR_ARG, "%s: relative Depth Anything V2 gives no metres for %s; use MoGe-2 or a "
-                           "metric checkpoint (--max-depth), or give --depth", in->depth_model, in->rgb);
-    }
-    if (in->rgb && !in->depth) {
-        g3d_intrinsics K = g3d_intrinsics_make(in->fx, in->fy, in->cx, in->cy, 0, 0);
-        return g3d_frame_load_rgb(in->rgb, &in->model, K, in->fov, in->max_side, f);
-    }
-    if (!in->rgb) {
-        g3d_status rc = g3d_frame_load_middlebury(in->default_dir, f);
-        if (rc != G3D_OK) g3d_error_prefix("default input (run scripts/fetch-default-input.sh)");
-        return rc;
-    }
-    g3d_intrinsics K = g3d_intrinsics_make(in->fx, in->fy, in->cx, in->cy, 0, 0);
-    return g3d_frame_load_rgbd(in->rgb, in->depth, in->scale, K, in->fov, f);
-}
-
-const g3d_depth_estimator *g3d_cli_input_model(const g3d_cli_input *in)
-{
-    return in->model.estimate ? &in->model : NULL;
-}
-
-void g3d_cli_input_free(g3d_cli_input *in)
-{
-    if (in->model.free) in->model.free(in->model.ctx);
-    memset(&in->model, 0, sizeof in->model);
+    p->input.rgb_path = in->rgb;
+    p->input.depth_path = in->depth;
+    p->input.depth_scale = in->scale;
+    p->input.K = g3d_intrinsics_make(in->fx, in->fy, in->cx, in->cy, 0, 0);
+    p->input.fov_deg = in->fov;
+    p->input.default_dir = in->default_dir;
+    p->depth_model = in->depth_model;
+    if (in->max_depth > 0) p->depth_model_params.max_depth = in->max_depth;
+    p->depth_model_params.num_tokens = in->depth_tokens;
 }

@@ -5,15 +5,12 @@
 #define G3D_INPUT_OPTS_H
 
 #include "cli.h"
-#include "gen3d/depth_estimators.h"
-#include "gen3d/frame.h"
+#include "gen3d/generate.h"
 
 typedef struct g3d_cli_input {
     const char *rgb, *depth, *default_dir, *depth_model;
     double scale, fx, fy, cx, cy, fov, max_depth;
-    int max_side;                /* set by the command: the model predicts at this size (0: full) */
     int depth_tokens;            /* MoGe-2 encoder tokens; 0: the model's default */
-    g3d_depth_estimator model;   /* opened by g3d_cli_input_load when --depth-model is given */
 } g3d_cli_input;
 
 #define G3D_INPUT_OPTS(in)                                                                                        \
@@ -30,15 +27,11 @@ typedef struct g3d_cli_input {
     {0, "fov", G3D_OPT_DOUBLE, &(in)->fov, "DEG", "horizontal field of view instead of --fx (default 60)"},        \
     {0, "default-input", G3D_OPT_STRING, &(in)->default_dir, "DIR", "folder of the default input (Middlebury Motorcycle)"}
 
+/* The library's defaults (g3d_frame_params_default). */
 void g3d_cli_input_init(g3d_cli_input *in);
 /* Usage checks; returns 0 or G3D_EXIT_USAGE after printing the problem. */
 int g3d_cli_input_check(const g3d_cli_input *in);
-/* Opens the depth model if one is given (in->model; a metric one is required when it must
- * supply the input's depth), then loads the frame the options describe. */
-g3d_status g3d_cli_input_load(g3d_cli_input *in, g3d_frame *f);
-/* The depth model as the world loop's depth estimator, or NULL for depth completion. */
-const g3d_depth_estimator *g3d_cli_input_model(const g3d_cli_input *in);
-/* Releases the depth model. */
-void g3d_cli_input_free(g3d_cli_input *in);
+/* Copies the options into the pipeline's input and depth-model parameters. */
+void g3d_cli_input_apply(const g3d_cli_input *in, g3d_generate_params *p);
 
 #endif

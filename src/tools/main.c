@@ -21,7 +21,7 @@ static void print_usage(FILE *out)
     fprintf(out,
             "\ncommon options: -o/--output PATH, -s/--seed N, -t/--threads N, -q/--quiet, -v/--verbose\n"
             "Results are printed on stdout, progress and messages on stderr. Exit status: 0 success,\n"
-            "1 failure (bad input, I/O error), 2 usage error.\n");
+            "1 failure (bad input, I/O error), 2 usage error, 130 interrupted.\n");
 }
 
 int main(int argc, char **argv)

@@ -1,10 +1,10 @@
-/* world_opts.h - the world-generation options and run, shared by the commands that grow a
- * scene from one frame (world, generate). */
+/* world_opts.h - the world-generation options, shared by the commands that grow a scene from
+ * one frame (world, generate). */
 #ifndef G3D_WORLD_OPTS_H
 #define G3D_WORLD_OPTS_H
 
 #include "cli.h"
-#include "gen3d/world.h"
+#include "gen3d/generate.h"
 
 typedef struct g3d_cli_world {
     const char *trajectory;
@@ -21,16 +21,14 @@ typedef struct g3d_cli_world {
     {0, "max-side", G3D_OPT_INT, &(w)->max_side, "PX", "downscale the input so that its longer side is at most this"}, \
     {0, "no-layers", G3D_OPT_FLAG, &(w)->no_layers, NULL, "skip the foreground/background split"}
 
+/* The library's defaults (g3d_generate_params_default). */
 void g3d_cli_world_init(g3d_cli_world *w);
 /* Usage checks; returns 0 or G3D_EXIT_USAGE after printing the problem. */
 int g3d_cli_world_check(const g3d_cli_world *w);
 /* Appends the trajectory section of --help (the preset list) to buf at offset k; returns the
  * new length. */
 int g3d_cli_world_help(char *buf, int k, int cap);
-/* Builds the poses (a file if one exists under the trajectory's name, else a preset scaled
- * by the frame's median depth), the weight-free inpainter and mask provider, and runs world
- * generation on f (already size-limited). depth NULL = depth completion. */
-g3d_status g3d_cli_world_run(const g3d_cli_world *w, const g3d_frame *f, const g3d_depth_estimator *depth,
-                             uint64_t seed, g3d_world *out);
+/* Copies the options into the pipeline's world parameters. */
+void g3d_cli_world_apply(const g3d_cli_world *w, g3d_generate_params *p);
 
 #endif

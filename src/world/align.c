@@ -6,10 +6,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-g3d_align_params g3d_align_params_default(void)
+void g3d_align_params_default(g3d_align_params *p)
 {
-    g3d_align_params p = {3.0f, 3.0f};
-    return p;
+    *p = (g3d_align_params){3.0f, 3.0f};
 }
 
 g3d_status g3d_align_depth(g3d_image *depth_new, const g3d_image *depth_cloud, const g3d_image *mask,
@@ -17,7 +16,8 @@ g3d_status g3d_align_depth(g3d_image *depth_new, const g3d_image *depth_cloud, c
 {
     int w = depth_new->w, h = depth_new->h;
     size_t n = (size_t)w * h;
-    g3d_align_params def = g3d_align_params_default();
+    g3d_align_params def;
+    g3d_align_params_default(&def);
     g3d_align_stats st;
     memset(&st, 0, sizeof st);
     if (!p) p = &def;

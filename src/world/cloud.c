@@ -98,10 +98,9 @@ g3d_status g3d_cloud_lift(g3d_cloud *c, const g3d_image *rgb, const g3d_image *d
     return G3D_OK;
 }
 
-g3d_render_params g3d_render_params_default(void)
+void g3d_cloud_render_params_default(g3d_cloud_render_params *p)
 {
-    g3d_render_params p = {0.02f, 1.0f, 1};
-    return p;
+    *p = (g3d_cloud_render_params){0.02f, 1.0f, 1};
 }
 
 /* The projected footprint of a point: centre (u, v), depth z, and the parallelogram
@@ -178,13 +177,14 @@ static int splat_covers(const splat *s, int x, int y, double *r2)
     return fabs(al) <= 1.0 && fabs(be) <= 1.0;
 }
 
-g3d_status g3d_cloud_render(const g3d_cloud *c, const g3d_camera *cam, const g3d_render_params *p,
+g3d_status g3d_cloud_render(const g3d_cloud *c, const g3d_camera *cam, const g3d_cloud_render_params *p,
                             g3d_image *rgb, g3d_image *depth, g3d_image *mask)
 {
     const g3d_intrinsics *K = &cam->K;
     int w = K->width, h = K->height;
     size_t npx = (size_t)w * h;
-    g3d_render_params def = g3d_render_params_default();
+    g3d_cloud_render_params def;
+    g3d_cloud_render_params_default(&def);
     if (!p) p = &def;
     if (w < 1 || h < 1 || w > G3D_MAX_IMAGE_SIDE || h > G3D_MAX_IMAGE_SIDE || !(K->fx > 0) || !(K->fy > 0))
         return G3D_ERR(G3D_ERR_ARG, "render: bad camera (%dx%d, fx %g)", w, h, K->fx);

@@ -5,10 +5,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-g3d_layers_params g3d_layers_params_default(void)
+void g3d_layers_params_default(g3d_layers_params *p)
 {
-    g3d_layers_params p = {0.85f, 0.005f, 0.60f, 0.35f, 0.3f, 2};
-    return p;
+    *p = (g3d_layers_params){0.85f, 0.005f, 0.60f, 0.35f, 0.3f, 2};
 }
 
 void g3d_layers_free(g3d_layers *l)
@@ -18,6 +17,18 @@ void g3d_layers_free(g3d_layers *l)
     g3d_image_free(&l->bg_rgb);
     g3d_image_free(&l->bg_depth);
     memset(l, 0, sizeof *l);
+}
+
+g3d_status g3d_layers_clone(g3d_layers *dst, const g3d_layers *src)
+{
+    *dst = *src;
+    dst->fg_mask = dst->bg_rgb = dst->bg_depth = (g3d_image){0};
+    g3d_status rc = G3D_OK;
+    if (src->fg_mask.data) rc = g3d_image_clone(&dst->fg_mask, &src->fg_mask);
+    if (rc == G3D_OK && src->bg_rgb.data) rc = g3d_image_clone(&dst->bg_rgb, &src->bg_rgb);
+    if (rc == G3D_OK && src->bg_depth.data) rc = g3d_image_clone(&dst->bg_depth, &src->bg_depth);
+    if (rc != G3D_OK) g3d_layers_free(dst);
+    return rc;
 }
 
 /* Fraction of the mask's boundary pixels with an outside 4-neighbour more than 5 % deeper. */
@@ -49,7 +60,8 @@ g3d_status g3d_layers_compute(const g3d_image *rgb, const g3d_image *depth, cons
                               const g3d_inpainter *inpaint, const g3d_depth_estimator *depth_fill,
                               const g3d_layers_params *p, uint64_t seed, g3d_layers *out)
 {
-    g3d_layers_params def = g3d_layers_params_default();
+    g3d_layers_params def;
+    g3d_layers_params_default(&def);
     int w = rgb->w, h = rgb->h;
     size_t n = (size_t)w * h;
     memset(out, 0, sizeof *out);

@@ -1,8 +1,9 @@
-/* The world-generation loop and its dataset writer. */
+/* The world-generation loop, and the world folder: writer and reader. */
 #include "gen3d/world.h"
-#include "gen3d/cameras_json.h"
+#include "gen3d/dataset.h"
 #include "gen3d/depthio.h"
 #include "gen3d/imageio.h"
+#include "gen3d/npy.h"
 #include "gen3d/trajectory.h"
 
 #include <cjson/cJSON.h>
@@ -10,17 +11,15 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
-g3d_world_params g3d_world_params_default(void)
+void g3d_world_params_default(g3d_world_params *p)
 {
-    g3d_world_params p;
-    memset(&p, 0, sizeof p);
-    p.extra_views = 10;
-    p.extra_angle_deg = 5.0;
-    p.render = g3d_render_params_default();
-    p.align = g3d_align_params_default();
-    p.layers = g3d_layers_params_default();
-    return p;
+    memset(p, 0, sizeof *p);
+    p->extra_views = 10;
+    p->extra_angle_deg = 5.0;
+    g3d_cloud_render_params_default(&p->render);
+    g3d_align_params_default(&p->align);
 }
 
 void g3d_world_free(g3d_world *w)
@@ -54,13 +53,11 @@ double g3d_depth_median(const g3d_image *depth)
 }
 
 /* Step 0: the input, and with layers the background hidden behind its foreground. */
-static g3d_status lift_input(g3d_world *w, const g3d_frame *in, const g3d_inpainter *inpaint,
-                             const g3d_depth_estimator *depth, const g3d_mask_provider *masks, const g3d_world_params *p,
-                             uint64_t seed)
+static g3d_status lift_input(g3d_world *w, const g3d_frame *in, const g3d_layers *layers)
 {
     G3D_TRY(g3d_cloud_lift(&w->cloud, &in->rgb, &in->depth, &w->cams[0], NULL, 0, &w->steps[0].points_added));
-    if (masks) {
-        G3D_TRY(g3d_layers_compute(&in->rgb, &in->depth, masks, inpaint, depth, &p->layers, seed, &w->layers));
+    if (layers) {
+        G3D_TRY(g3d_layers_clone(&w->layers, layers));
         if (w->layers.n_foreground) {
             int64_t added;
             G3D_TRY(g3d_cloud_lift(&w->cloud, &w->layers.bg_rgb, &w->layers.bg_depth, &w->cams[0], &w->layers.fg_mask, 0, &added));
@@ -122,10 +119,11 @@ done:
 }
 
 g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int n_poses, const g3d_inpainter *inpaint,
-                              const g3d_depth_estimator *depth, const g3d_mask_provider *masks,
+                              const g3d_depth_estimator *depth, const g3d_layers *layers,
                               const g3d_world_params *p, uint64_t seed, g3d_world *out)
 {
-    g3d_world_params def = g3d_world_params_default();
+    g3d_world_params def;
+    g3d_world_params_default(&def);
     if (!p) p = &def;
     memset(out, 0, sizeof *out);
     if (n_poses < 1 || n_poses > 10000) return G3D_ERR(G3D_ERR_ARG, "world: %d poses (need 1..10000)", n_poses);
@@ -142,14 +140,15 @@ g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int
         out->cams[i].K = input->cam.K;
         out->cams[i].c2w = g3d_mat4_mul(input->cam.c2w, poses[i]);
     }
-    if (rc == G3D_OK) rc = lift_input(out, input, inpaint, depth, masks, p, seed);
-    g3d_progress_report(&p->progress, "world", 1, n_poses, NULL);
+    if (rc == G3D_OK) rc = lift_input(out, input, layers);
+    if (rc == G3D_OK && g3d_progress_report(&p->progress, "world", 1, n_poses, NULL))
+        rc = G3D_ERR(G3D_CANCELLED, "world generation cancelled");
     for (int i = 1; i < n_poses && rc == G3D_OK; i++) {
         rc = world_step(out, i, inpaint, depth, p, seed);
         char info[96];
         snprintf(info, sizeof info, "holes %.1f %%, %lld points", 100.0 * out->steps[i].hole_fraction, (long long)out->cloud.n);
         if (rc == G3D_OK && g3d_progress_report(&p->progress, "world", i + 1, n_poses, info))
-            rc = G3D_ERR(G3D_ERR_ARG, "world generation cancelled");
+            rc = G3D_ERR(G3D_CANCELLED, "world generation cancelled");
     }
     /* Extra views: orbits around the poses, rendered from the final cloud, not inpainted. */
     if (rc == G3D_OK && p->extra_views > 0) {
@@ -173,7 +172,8 @@ g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int
             out->extra_cams[k].c2w = g3d_mat4_mul(input->cam.c2w, orb[pose * per + j]);
             rc = g3d_cloud_render(&out->cloud, &out->extra_cams[k], &p->render, &out->extra_rgb[k], NULL, &out->extra_mask[k]);
             if (rc == G3D_OK) out->n_extra = k + 1;
-            g3d_progress_report(&p->progress, "extra views", k + 1, m, NULL);
+            if (rc == G3D_OK && g3d_progress_report(&p->progress, "extra views", k + 1, m, NULL))
+                rc = G3D_ERR(G3D_CANCELLED, "world generation cancelled");
         }
         free(orb);
     }
@@ -181,7 +181,7 @@ g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int
     return rc;
 }
 
-/* ---- dataset ------------------------------------------------------------------------------ */
+/* ---- the world folder ---------------------------------------------------------------------- */
 
 static g3d_status save_in(const char *dir, const char *name, g3d_status (*fn)(const char *, const g3d_image *), const g3d_image *img)
 {
@@ -208,6 +208,29 @@ static cJSON *step_json(int i, const g3d_world_step *s)
     return o;
 }
 
+g3d_status g3d_world_cameras(const g3d_world *w, const char *prefix, g3d_camera_list *out)
+{
+    char name[4096];
+    if (!prefix) prefix = "";
+    G3D_TRY(g3d_camera_list_create(out, w->n_views + w->n_extra));
+    g3d_status rc = G3D_OK;
+    for (int i = 0; i < w->n_views && rc == G3D_OK; i++) {
+        out->cams[i] = w->cams[i];
+        snprintf(name, sizeof name, "%sviews/view_%03d.png", prefix, i);
+        rc = g3d_camera_list_set_name(out, i, name);
+    }
+    for (int k = 0; k < w->n_extra && rc == G3D_OK; k++) {
+        int i = w->n_views + k;
+        out->cams[i] = w->extra_cams[k];
+        snprintf(name, sizeof name, "%sextra/extra_%03d.png", prefix, k);
+        rc = g3d_camera_list_set_name(out, i, name);
+        snprintf(name, sizeof name, "%smasks/extra_%03d.png", prefix, k);
+        if (rc == G3D_OK) rc = g3d_camera_list_set_mask(out, i, name);
+    }
+    if (rc != G3D_OK) g3d_camera_list_free(out);
+    return rc;
+}
+
 g3d_status g3d_world_save(const g3d_world *w, const char *dir, uint64_t seed)
 {
     char *tmp = NULL, *sub = NULL, name[96];
@@ -221,12 +244,9 @@ g3d_status g3d_world_save(const g3d_world *w, const char *dir, uint64_t seed)
         rc = sub ? g3d_mkdirs(sub) : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
         free(sub);
     }
-    if (rc == G3D_OK) rc = g3d_camera_list_create(&cams, w->n_views + w->n_extra);
+    if (rc == G3D_OK) rc = g3d_world_cameras(w, NULL, &cams);
     for (int i = 0; i < w->n_views && rc == G3D_OK; i++) {
-        snprintf(name, sizeof name, "views/view_%03d.png", i);
-        rc = save_in(tmp, name, save_png8, &w->rgb[i]);
-        cams.cams[i] = w->cams[i];
-        if (rc == G3D_OK) rc = g3d_camera_list_set_name(&cams, i, name);
+        rc = save_in(tmp, cams.names[i], save_png8, &w->rgb[i]);
         snprintf(name, sizeof name, "depth/view_%03d.png", i);
         if (rc == G3D_OK) rc = save_in(tmp, name, g3d_depth_save, &w->depth[i]);
         snprintf(name, sizeof name, "depth/view_%03d.npy", i);
@@ -234,13 +254,8 @@ g3d_status g3d_world_save(const g3d_world *w, const char *dir, uint64_t seed)
     }
     for (int k = 0; k < w->n_extra && rc == G3D_OK; k++) {
         int i = w->n_views + k;
-        snprintf(name, sizeof name, "extra/extra_%03d.png", k);
-        rc = save_in(tmp, name, save_png8, &w->extra_rgb[k]);
-        cams.cams[i] = w->extra_cams[k];
-        if (rc == G3D_OK) rc = g3d_camera_list_set_name(&cams, i, name);
-        snprintf(name, sizeof name, "masks/extra_%03d.png", k);
-        if (rc == G3D_OK) rc = save_in(tmp, name, save_png8, &w->extra_mask[k]);
-        if (rc == G3D_OK) rc = g3d_camera_list_set_mask(&cams, i, name);
+        rc = save_in(tmp, cams.names[i], save_png8, &w->extra_rgb[k]);
+        if (rc == G3D_OK) rc = save_in(tmp, cams.mask_paths[i], save_png8, &w->extra_mask[k]);
     }
     if (rc == G3D_OK && w->layers.fg_mask.data) {
         rc = save_in(tmp, "layers/fg_mask.png", save_png8, &w->layers.fg_mask);
@@ -272,5 +287,152 @@ g3d_status g3d_world_save(const g3d_world *w, const char *dir, uint64_t seed)
     free(tmp);
     g3d_camera_list_free(&cams);
     g3d_points_free(&pts);
+    return rc;
+}
+
+/* ---- reading a world folder back ------------------------------------------------------------- */
+
+static double json_num(const cJSON *o, const char *key)
+{
+    const cJSON *v = cJSON_GetObjectItemCaseSensitive(o, key);
+    return cJSON_IsNumber(v) ? v->valuedouble : 0.0;
+}
+
+/* log.json, when present: its parsed tree (*root, NULL without a log; caller deletes) and the
+ * number of generated views (*views, -1 without a log). */
+static g3d_status read_log(const char *dir, int *views, cJSON **root)
+{
+    char *p = g3d_path_join(dir, "log.json");
+    unsigned char *text = NULL;
+    size_t n = 0;
+    struct stat st;
+    *views = -1;
+    *root = NULL;
+    if (!p) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    g3d_status rc = stat(p, &st) == 0 ? g3d_read_file(p, (size_t)1 << 26, &text, &n) : G3D_OK;
+    if (rc == G3D_OK && text) {
+        *root = cJSON_Parse((const char *)text);
+        const cJSON *v = cJSON_GetObjectItemCaseSensitive(*root, "views");
+        if (!cJSON_IsObject(*root) || !cJSON_IsNumber(v) || v->valuedouble < 0 || v->valuedouble > 1e6)
+            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: not a world log (no \"views\" count)", p);
+        else
+            *views = (int)v->valuedouble;
+    }
+    free(text);
+    free(p);
+    if (rc != G3D_OK) {
+        cJSON_Delete(*root);
+        *root = NULL;
+    }
+    return rc;
+}
+
+static void steps_from_log(const cJSON *root, g3d_world *w)
+{
+    const cJSON *steps = cJSON_GetObjectItemCaseSensitive(root, "steps"), *s;
+    cJSON_ArrayForEach(s, steps)
+    {
+        int i = (int)json_num(s, "step");
+        if (i < 0 || i >= w->n_views) continue;
+        g3d_world_step *st = &w->steps[i];
+        st->hole_fraction = json_num(s, "hole_fraction");
+        st->points_added = (int64_t)json_num(s, "points_added");
+        st->align.correspondences = (int64_t)json_num(s, "correspondences");
+        st->align.rejected = (int64_t)json_num(s, "outliers");
+        st->align.residual_before = json_num(s, "residual_before");
+        st->align.residual_after = json_num(s, "residual_after");
+        st->align.median_ratio = json_num(s, "median_depth_ratio");
+    }
+}
+
+/* Loads dir/name into *img when the file exists, leaving it empty otherwise: as an image of
+ * `channels` channels, or as depth when channels is 0. */
+static g3d_status load_if_present(const char *dir, const char *name, int channels, g3d_image *img)
+{
+    struct stat st;
+    char *p = g3d_path_join(dir, name);
+    if (!p) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    g3d_status rc = stat(p, &st) != 0 ? G3D_OK : channels ? g3d_image_load(p, channels, img) : g3d_depth_load(p, 0, img);
+    free(p);
+    return rc;
+}
+
+static g3d_status cloud_from_points(const g3d_points *pts, g3d_cloud *c)
+{
+    G3D_TRY(g3d_cloud_init(c));
+    G3D_TRY(g3d_cloud_reserve(c, pts->n));
+    for (int64_t i = 0; i < pts->n; i++) {
+        for (int k = 0; k < 3; k++) {
+            c->xyz[3 * i + k] = pts->xyz[3 * i + k];
+            c->rgb[3 * i + k] = pts->rgb[3 * i + k] / 255.0f;
+        }
+        c->size[i] = 0;
+        memset(c->span + 6 * i, 0, sizeof(float) * 6);
+        c->view[i] = -1;
+    }
+    c->n = pts->n;
+    return G3D_OK;
+}
+
+g3d_status g3d_world_load(const char *dir, g3d_world *w)
+{
+    g3d_dataset d;
+    cJSON *log = NULL;
+    int nv;
+    memset(w, 0, sizeof *w);
+    G3D_TRY(g3d_dataset_load(dir, 1, &d));
+    g3d_status rc = read_log(dir, &nv, &log);
+    if (rc == G3D_OK && nv > d.n) rc = G3D_ERR(G3D_ERR_FORMAT, "%s/log.json: %d views, the camera file lists %d frames", dir, nv, d.n);
+    /* which frames are generated views: the log's first nv, else those without a mask */
+    for (int i = 0; i < d.n && rc == G3D_OK; i++) {
+        int is_view = nv >= 0 ? i < nv : !d.masks[i].data;
+        if (!is_view && !d.masks[i].data)
+            rc = G3D_ERR(G3D_ERR_FORMAT, "%s: extra view %d has no mask_path", dir, i - nv);
+        if (is_view) w->n_views++;
+        else w->n_extra++;
+    }
+    if (rc == G3D_OK) {
+        size_t v = (size_t)(w->n_views ? w->n_views : 1), e = (size_t)(w->n_extra ? w->n_extra : 1);
+        w->cams = calloc(v, sizeof *w->cams);
+        w->rgb = calloc(v, sizeof *w->rgb);
+        w->depth = calloc(v, sizeof *w->depth);
+        w->steps = calloc(v, sizeof *w->steps);
+        w->extra_cams = calloc(e, sizeof *w->extra_cams);
+        w->extra_rgb = calloc(e, sizeof *w->extra_rgb);
+        w->extra_mask = calloc(e, sizeof *w->extra_mask);
+        if (!w->cams || !w->rgb || !w->depth || !w->steps || !w->extra_cams || !w->extra_rgb || !w->extra_mask)
+            rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    }
+    /* the images move from the dataset into the world */
+    int iv = 0, ie = 0;
+    char name[64];
+    for (int i = 0; i < d.n && rc == G3D_OK; i++) {
+        if (nv >= 0 ? i < nv : !d.masks[i].data) {
+            w->cams[iv] = d.cams.cams[i];
+            w->rgb[iv] = d.images[i];
+            g3d_image_free(&d.masks[i]);
+            snprintf(name, sizeof name, "depth/view_%03d.npy", iv);
+            rc = load_if_present(dir, name, 0, &w->depth[iv]);
+            iv++;
+        } else {
+            w->extra_cams[ie] = d.cams.cams[i];
+            w->extra_rgb[ie] = d.images[i];
+            w->extra_mask[ie] = d.masks[i];
+            ie++;
+        }
+        memset(&d.images[i], 0, sizeof d.images[i]);
+        memset(&d.masks[i], 0, sizeof d.masks[i]);
+    }
+    if (rc == G3D_OK && log) steps_from_log(log, w);
+    if (rc == G3D_OK) rc = load_if_present(dir, "layers/fg_mask.png", 1, &w->layers.fg_mask);
+    if (rc == G3D_OK && w->layers.fg_mask.data) {
+        rc = load_if_present(dir, "layers/bg_rgb.png", 3, &w->layers.bg_rgb);
+        if (rc == G3D_OK) rc = load_if_present(dir, "layers/bg_depth.png", 0, &w->layers.bg_depth);
+        w->layers.n_foreground = (int)json_num(log, "foreground_objects");
+    }
+    if (rc == G3D_OK) rc = cloud_from_points(&d.points, &w->cloud);
+    cJSON_Delete(log);
+    g3d_dataset_free(&d);
+    if (rc != G3D_OK) g3d_world_free(w);
     return rc;
 }

@@ -1,0 +1,141 @@
+/* gen3d/generate.h - the whole pipeline in one call: one input to a trained Gaussian-splat
+ * scene and its outputs.
+ *
+ *     input ──► layers ──► world ──► splats ──► outputs
+ *     (frame)   (fg/bg)    (cloud,    (trained   (scene.ply/.spz, cameras, dataset,
+ *                           views)     Gaussians)  preview, video, summary)
+ *
+ * Each stage hands the next a struct in memory (g3d_frame, g3d_layers, g3d_world,
+ * g3d_gaussians); files are only written at the end, into one output folder, atomically: a
+ * run that fails or is cancelled leaves nothing behind.
+ *
+ * USAGE
+ *     g3d_generate_params p;
+ *     g3d_generate_params_default(&p);
+ *     p.input.rgb_path = "room.png";                 // or p.frame = &my_frame
+ *     p.input.depth_path = "room_depth.png";         // or p.depth_model = "moge2.pt"
+ *     g3d_train_params_default(&p.train, 1000);      // a shorter schedule
+ *     p.output_dir = "scene";
+ *     g3d_generate_result r;
+ *     if (g3d_generate(&p, &r) != G3D_OK) fprintf(stderr, "%s\n", g3d_error_message());
+ *     ... r.scene, r.seconds[G3D_STAGE_SPLATS] ...
+ *     g3d_generate_result_free(&r);
+ *
+ * PLUG-INS
+ *   The inpainter, depth estimator and mask provider (providers.h) are either passed in (the
+ *   caller keeps ownership; e.g. a diffusion inpainter or a segmentation model) or, when NULL,
+ *   made by the run from the parameters and released at its end: the classical inpainter,
+ *   the depth model in `depth_model` or else depth completion, the weight-free region
+ *   proposals (regions.h). A plug-in's own parameters go to its create function.
+ *
+ * PROGRESS AND CANCELLING
+ *   `progress` receives every stage's reports (stage names "world", "extra views", "train",
+ *   "render"); `cancel` is polled at each report and between the stages. A cancelled run
+ *   returns G3D_CANCELLED. The progress fields inside the stage parameters are ignored.
+ *
+ * A run is deterministic for a seed and thread count. Runs in different threads are
+ * independent apart from the process-wide log and OpenMP settings (base.h).
+ */
+#ifndef G3D_GENERATE_H
+#define G3D_GENERATE_H
+
+#include "gen3d/depth_estimators.h"
+#include "gen3d/frame.h"
+#include "gen3d/layers.h"
+#include "gen3d/providers.h"
+#include "gen3d/render.h"
+#include "gen3d/train.h"
+#include "gen3d/trajectory.h"
+#include "gen3d/world.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef enum g3d_stage {
+    G3D_STAGE_INPUT,    /* the input frame: files, or an image and a depth model */
+    G3D_STAGE_LAYERS,   /* foreground / background split */
+    G3D_STAGE_WORLD,    /* world generation along the trajectory */
+    G3D_STAGE_SPLATS,   /* Gaussians initialised from the cloud and trained */
+    G3D_STAGE_OUTPUTS,  /* files: dataset, cameras, scene, preview, video, summary */
+    G3D_STAGE_COUNT
+} g3d_stage;
+
+/* "input", "layers", "world", "splats", "outputs"; "unknown" otherwise. */
+const char *g3d_stage_name(g3d_stage s);
+
+typedef struct g3d_generate_params {
+    /* ---- input ---- */
+    g3d_frame_params input;           /* where the frame comes from; max_side 512 */
+    const g3d_frame *frame;           /* a frame already in memory instead, used as it is
+                                         (borrowed; `input` is then ignored) */
+    const char *world_dir;            /* start from a saved world folder (g3d_world_load; any
+                                         dataset folder): input, layers and world are skipped */
+    /* ---- plug-ins: NULL = made by the run ---- */
+    const g3d_inpainter *inpainter;       /* NULL: the classical PatchMatch inpainter */
+    const g3d_depth_estimator *depth;     /* NULL: depth_model when given, else depth completion */
+    const g3d_mask_provider *masks;       /* NULL: weight-free region proposals */
+    const char *depth_model;              /* checkpoint for the depth estimator (recognize.h) */
+    g3d_depth_model_params depth_model_params;
+    /* ---- layers ---- */
+    int layers;                       /* 1: split foreground and background (default) */
+    g3d_layers_params layers_params;
+    /* ---- world ---- */
+    const char *trajectory;           /* a preset (trajectory.h) or a camera file ("rotate") */
+    g3d_trajectory_params trajectory_params;
+    int steps;                        /* generation steps after the input; a preset or file of
+                                         another length is picked down or up to steps + 1 poses
+                                         (g3d_trajectory_pick); 0: as it is */
+    g3d_world_params world;
+    /* ---- splats ---- */
+    int sh_degree;                    /* 0..3 (3) */
+    g3d_train_params train;           /* g3d_train_params_default(&p.train, 3000); its seed is
+                                         replaced by `seed` */
+    /* ---- outputs ---- */
+    const char *output_dir;           /* NULL: no files (the result still holds the scene) */
+    g3d_stage last_stage;             /* G3D_STAGE_OUTPUTS: the whole run into output_dir;
+                                         G3D_STAGE_WORLD: stop there, output_dir is the world
+                                         folder (g3d_world_save); G3D_STAGE_INPUT: stop there,
+                                         output_dir is the frame folder (g3d_frame_save) */
+    int video;                        /* 1: a fly-through video.mp4 (PNG frames without ffmpeg) */
+    const char *video_trajectory;     /* "swing" or a preset (render.h g3d_render_flythrough) */
+    int video_frames;                 /* 120 */
+    g3d_video_params video_params;
+    /* ---- the run ---- */
+    uint64_t seed;                    /* 42 */
+    g3d_progress progress;
+    g3d_cancel cancel;
+} g3d_generate_params;
+
+/* Fills the defaults given above. */
+void g3d_generate_params_default(g3d_generate_params *p);
+
+typedef struct g3d_generate_result {
+    double seconds[G3D_STAGE_COUNT];  /* wall time of each stage (0 for stages skipped) */
+    double seconds_total;
+    int width, height;                /* of the input frame (the world's first view) */
+    int views, extra_views;           /* generated views (input included) and extra views */
+    int foreground_objects;
+    int64_t points;                   /* points in the world's cloud */
+    int64_t initial_gaussians, gaussians;
+    double train_loss, train_psnr;    /* over the last report period of training, dB */
+    int video_written;                /* video.mp4 exists */
+    const char *video_note;           /* why no video was written when one was asked for (static), or NULL */
+    int viewer_written;               /* viewer.html exists (the viewer template is installed) */
+    g3d_gaussians scene;              /* the trained Gaussians (empty when the run stopped earlier) */
+} g3d_generate_result;
+
+/* Runs the pipeline p describes. res (may be NULL) is filled on success and zeroed on
+ * failure; it owns res->scene (g3d_generate_result_free). Parameters are checked before any
+ * work (unknown trajectory or video path, bad sizes: G3D_ERR_ARG), and the output folder is
+ * claimed next (an existing folder is replaced only if it is an earlier gen3d output). Errors:
+ * those of the stages, each naming its file or step; G3D_CANCELLED when cancelled. */
+g3d_status g3d_generate(const g3d_generate_params *p, g3d_generate_result *res);
+
+/* Frees res->scene and zeroes res; NULL is fine. */
+void g3d_generate_result_free(g3d_generate_result *res);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* G3D_GENERATE_H */

@@ -1,0 +1,88 @@
+/* Model recognition: one table of signatures, from checkpoint content only. */
+#include "gen3d/recognize.h"
+
+#include <cjson/cJSON.h>
+#include <stdio.h>
+
+g3d_model_kind g3d_model_recognize(const g3d_ckpt *ck)
+{
+    if (cJSON_IsObject(cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "model_config"))) return G3D_MODEL_MOGE;
+    if (g3d_ckpt_find(ck, "pretrained.blocks.0.attn.qkv.weight") && g3d_ckpt_find(ck, "depth_head.scratch.output_conv2.2.weight"))
+        return G3D_MODEL_DEPTH_ANYTHING_V2;
+    return G3D_MODEL_UNKNOWN;
+}
+
+g3d_model_kind g3d_model_recognize_file(const char *path)
+{
+    g3d_ckpt *ck = NULL;
+    if (g3d_ckpt_open(path, &ck) != G3D_OK) {
+        g3d_error_clear();
+        return G3D_MODEL_UNKNOWN;
+    }
+    g3d_model_kind k = g3d_model_recognize(ck);
+    g3d_ckpt_free(ck);
+    return k;
+}
+
+/* The name of a published DINOv2 encoder of this width and depth ("ViT" otherwise): a label
+ * only, every figure printed comes from the tensors. */
+static const char *vit_name(int64_t width, int blocks)
+{
+    if (width == 384 && blocks == 12) return "vits: ViT-S";
+    if (width == 768 && blocks == 12) return "vitb: ViT-B";
+    if (width == 1024 && blocks == 24) return "vitl: ViT-L";
+    if (width == 1536 && blocks == 40) return "vitg: ViT-g";
+    return "ViT";
+}
+
+/* Transformer blocks of a DINOv2 backbone stored under `prefix`. */
+static int count_blocks(const g3d_ckpt *ck, const char *prefix)
+{
+    char name[128];
+    int blocks = 0;
+    for (;; blocks++) {
+        snprintf(name, sizeof name, "%sblocks.%d.attn.qkv.weight", prefix, blocks);
+        if (!g3d_ckpt_find(ck, name)) return blocks;
+    }
+}
+
+/* The first dimension of a tensor, or 0. */
+static long long dim0(const g3d_ckpt *ck, const char *name)
+{
+    const g3d_tensor_info *t = g3d_ckpt_find(ck, name);
+    return t && t->ndim > 0 ? (long long)t->shape[0] : 0;
+}
+
+const char *g3d_model_describe(const g3d_ckpt *ck, char *buf, size_t n)
+{
+    /* Depth Anything V2: DINOv2 under "pretrained.", DPT head under "depth_head."; sizes from
+     * the shapes (heads of 64 channels, as in every published DINOv2). */
+    const g3d_tensor_info *qkv = g3d_ckpt_find(ck, "pretrained.blocks.0.attn.qkv.weight");
+    const g3d_tensor_info *pe = g3d_ckpt_find(ck, "pretrained.patch_embed.proj.weight");
+    if (qkv && g3d_ckpt_find(ck, "depth_head.scratch.output_conv2.2.weight") && qkv->ndim == 2) {
+        int blocks = count_blocks(ck, "pretrained.");
+        int64_t d = qkv->shape[1];
+        snprintf(buf, n, "Depth Anything V2 (%s/%lld, %d blocks, width %lld, %lld attention heads; DPT features %lld, out "
+                 "channels %lld, %lld, %lld, %lld)", vit_name(d, blocks), pe && pe->ndim == 4 ? (long long)pe->shape[3] : 0,
+                 blocks, (long long)d, (long long)d / 64, dim0(ck, "depth_head.scratch.layer1_rn.weight"),
+                 dim0(ck, "depth_head.projects.0.weight"), dim0(ck, "depth_head.projects.1.weight"),
+                 dim0(ck, "depth_head.projects.2.weight"), dim0(ck, "depth_head.projects.3.weight"));
+        return buf;
+    }
+    /* MoGe-2: DINOv2 under "encoder.backbone.", a ConvStack neck, the configuration beside the
+     * state dict (model_config.encoder.backbone names the ViT). */
+    const g3d_tensor_info *mq = g3d_ckpt_find(ck, "encoder.backbone.blocks.0.attn.qkv.weight");
+    if (mq && mq->ndim == 2 && g3d_ckpt_find(ck, "neck.input_blocks.0.weight") &&
+        g3d_ckpt_find(ck, "points_head.input_blocks.0.weight")) {
+        const cJSON *cfg = cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "model_config");
+        const cJSON *enc = cJSON_GetObjectItemCaseSensitive(cfg, "encoder");
+        const char *bb = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(enc, "backbone"));
+        int blocks = count_blocks(ck, "encoder.backbone.");
+        snprintf(buf, n, "MoGe-2 (%s, %d blocks, width %lld, %lld attention heads; heads: points%s%s%s)", bb ? bb : "DINOv2",
+                 blocks, (long long)mq->shape[1], (long long)mq->shape[1] / 64, g3d_ckpt_find(ck, "normal_head.input_blocks.0.weight") ? ", normal" : "",
+                 g3d_ckpt_find(ck, "mask_head.input_blocks.0.weight") ? ", mask" : "",
+                 g3d_ckpt_find(ck, "scale_head.0.weight") ? ", metric scale" : "");
+        return buf;
+    }
+    return NULL;
+}

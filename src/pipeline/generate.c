@@ -1,0 +1,546 @@
+/* The pipeline: input -> layers -> world -> splats -> outputs, each stage handing the next a
+ * struct in memory; the files are written once, at the end. */
+#include "gen3d/generate.h"
+#include "gen3d/depth_complete.h"
+#include "gen3d/imageio.h"
+#include "gen3d/init.h"
+#include "gen3d/inpaint_classic.h"
+#include "gen3d/ply.h"
+#include "gen3d/raster.h"
+#include "gen3d/regions.h"
+#include "gen3d/spz.h"
+#include "gen3d/viewer.h"
+
+#include <cjson/cJSON.h>
+#include <omp.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char *const g_stage_names[G3D_STAGE_COUNT] = {"input", "layers", "world", "splats", "outputs"};
+
+const char *g3d_stage_name(g3d_stage s)
+{
+    return (int)s >= 0 && s < G3D_STAGE_COUNT ? g_stage_names[s] : "unknown";
+}
+
+void g3d_generate_params_default(g3d_generate_params *p)
+{
+    memset(p, 0, sizeof *p);
+    g3d_frame_params_default(&p->input);
+    p->input.max_side = 512;
+    g3d_depth_model_params_default(&p->depth_model_params);
+    p->layers = 1;
+    g3d_layers_params_default(&p->layers_params);
+    p->trajectory = "rotate";
+    g3d_trajectory_params_default(&p->trajectory_params);
+    g3d_world_params_default(&p->world);
+    p->sh_degree = 3;
+    g3d_train_params_default(&p->train, 3000);
+    p->last_stage = G3D_STAGE_OUTPUTS;
+    p->video = 1;
+    p->video_trajectory = "swing";
+    p->video_frames = 120;
+    g3d_video_params_default(&p->video_params);
+    p->seed = 42;
+}
+
+void g3d_generate_result_free(g3d_generate_result *res)
+{
+    if (!res) return;
+    g3d_gaussians_free(&res->scene);
+    memset(res, 0, sizeof *res);
+}
+
+/* One run's state: what each stage made, and the plug-ins made here (own_*). */
+typedef struct run {
+    const g3d_generate_params *p;
+    g3d_progress progress;             /* the user's progress, polling the cancel request */
+    g3d_frame frame;                   /* loaded here, unless p->frame */
+    const g3d_frame *input;
+    g3d_inpainter own_inpainter;
+    g3d_depth_estimator own_depth;
+    g3d_mask_provider own_masks;
+    const g3d_inpainter *inpainter;
+    const g3d_depth_estimator *depth;
+    const g3d_mask_provider *masks;
+    g3d_layers layers;
+    g3d_world world;
+    g3d_gaussians scene;
+    int64_t initial_gaussians;
+    g3d_train_result train;
+    g3d_render_result video;
+    int viewer_written;                /* viewer.html was written */
+    char *tmp;                         /* the output folder being written */
+} run;
+
+static int report(void *user, const char *stage, int64_t step, int64_t total, const char *info)
+{
+    const g3d_generate_params *p = user;
+    int stop = g3d_progress_report(&p->progress, stage, step, total, info);
+    return stop || g3d_cancel_requested(&p->cancel);
+}
+
+static g3d_status check_cancel(const run *r)
+{
+    return g3d_cancel_requested(&r->p->cancel) ? G3D_ERR(G3D_CANCELLED, "cancelled") : G3D_OK;
+}
+
+/* Everything that can be refused without work is refused before any: a mistyped path name
+ * fails now, not after minutes of training. */
+static g3d_status check_params(const g3d_generate_params *p)
+{
+    if (p->last_stage != G3D_STAGE_INPUT && p->last_stage != G3D_STAGE_WORLD && p->last_stage != G3D_STAGE_OUTPUTS)
+        return G3D_ERR(G3D_ERR_ARG, "generate: a run can stop after the input, the world or the outputs, not the %s",
+                       g3d_stage_name(p->last_stage));
+    if (p->world_dir && p->last_stage != G3D_STAGE_OUTPUTS)
+        return G3D_ERR(G3D_ERR_ARG, "%s: a run from a saved world goes on to the outputs", p->world_dir);
+    if (p->last_stage != G3D_STAGE_OUTPUTS && !p->output_dir)
+        return G3D_ERR(G3D_ERR_ARG, "generate: stopping after the %s writes its folder: give an output folder",
+                       g3d_stage_name(p->last_stage));
+    if (p->sh_degree < 0 || p->sh_degree > G3D_SH_MAX_DEGREE)
+        return G3D_ERR(G3D_ERR_ARG, "generate: SH degree %d is not in 0..%d", p->sh_degree, G3D_SH_MAX_DEGREE);
+    if (p->steps < 0 || p->steps > 10000) return G3D_ERR(G3D_ERR_ARG, "generate: %d steps (need 0..10000)", p->steps);
+    if (p->last_stage == G3D_STAGE_OUTPUTS && p->output_dir && p->video) {
+        if (p->video_frames < 2) return G3D_ERR(G3D_ERR_ARG, "generate: a video needs 2 frames at least, not %d", p->video_frames);
+        g3d_camera probe = {g3d_intrinsics_from_fov(60, 64, 48), g3d_mat4_identity()}, *cams = NULL;
+        int n;
+        G3D_TRY(g3d_render_flythrough(p->video_trajectory, NULL, NULL, &probe, 1.0, 2, &cams, &n));
+        free(cams);
+    }
+    if (!p->world_dir && p->last_stage != G3D_STAGE_INPUT && !g3d_trajectory_is_file(p->trajectory)) {
+        g3d_mat4 *poses = NULL;
+        int n;
+        G3D_TRY(g3d_trajectory_make(p->trajectory, &p->trajectory_params, 1.0, &poses, &n));
+        free(poses);
+    }
+    return G3D_OK;
+}
+
+/* ---- input ----------------------------------------------------------------------------------- */
+
+static void log_frame(const g3d_frame *f)
+{
+    size_t valid = 0, n = g3d_image_size(&f->depth);
+    double lo = 1e30, hi = 0;
+    for (size_t i = 0; i < n; i++)
+        if (f->depth.data[i] > 0) {
+            valid++;
+            lo = f->depth.data[i] < lo ? f->depth.data[i] : lo;
+            hi = f->depth.data[i] > hi ? f->depth.data[i] : hi;
+        }
+    g3d_log(G3D_LOG_INFO, "input %s: %dx%d, fx %.1f fy %.1f cx %.1f cy %.1f (horizontal fov %.1f deg)", f->name, f->rgb.w,
+            f->rgb.h, f->cam.K.fx, f->cam.K.fy, f->cam.K.cx, f->cam.K.cy, g3d_intrinsics_fov_x_deg(f->cam.K));
+    g3d_log(G3D_LOG_INFO, "depth %.3f .. %.3f m, %.1f %% of pixels valid%s", lo, hi, 100.0 * valid / n,
+            f->heldout.data ? "; a real held-out view is included" : "");
+}
+
+/* The depth estimator: the caller's, the model in p->depth_model, or depth completion. */
+static g3d_status make_depth(run *r)
+{
+    const g3d_generate_params *p = r->p;
+    if (p->depth) {
+        r->depth = p->depth;
+        return G3D_OK;
+    }
+    r->depth = &r->own_depth;
+    if (!p->depth_model) return g3d_depth_estimator_completion_create(&r->own_depth);
+    int metric = 0;
+    G3D_TRY(g3d_depth_estimator_model_create(p->depth_model, &p->depth_model_params, &r->own_depth, &metric));
+    g3d_log(G3D_LOG_INFO, "depth model: %s (%s)", p->depth_model, r->own_depth.name);
+    const char *rgb = p->input.rgb_path;
+    if (!p->frame && rgb && !p->input.depth_path && !metric)
+        return G3D_ERR(G3D_ERR_ARG, "%s: relative Depth Anything V2 gives no metres for %s; use MoGe-2 or a metric "
+                       "checkpoint (--max-depth), or give --depth", p->depth_model, rgb);
+    return G3D_OK;
+}
+
+static g3d_status stage_input(run *r)
+{
+    const g3d_generate_params *p = r->p;
+    G3D_TRY(make_depth(r));
+    if (p->frame) {
+        G3D_TRY(g3d_frame_validate(p->frame, p->frame->name[0] ? p->frame->name : "input frame"));
+        r->input = p->frame;
+    } else {
+        /* only a model predicts the depth of an image; completion needs depth to start from */
+        const g3d_depth_estimator *model = p->depth || p->depth_model ? r->depth : NULL;
+        G3D_TRY(g3d_frame_load(&p->input, model, &r->frame));
+        r->input = &r->frame;
+    }
+    log_frame(r->input);
+    if (p->last_stage == G3D_STAGE_INPUT) return g3d_frame_save(r->input, p->output_dir);
+    return G3D_OK;
+}
+
+/* ---- layers ---------------------------------------------------------------------------------- */
+
+static g3d_status stage_layers(run *r)
+{
+    const g3d_generate_params *p = r->p;
+    r->inpainter = p->inpainter;
+    if (!r->inpainter) {
+        G3D_TRY(g3d_inpainter_classic_create(NULL, &r->own_inpainter));
+        r->inpainter = &r->own_inpainter;
+    }
+    if (!p->layers) return G3D_OK;
+    r->masks = p->masks;
+    if (!r->masks) {
+        G3D_TRY(g3d_mask_provider_regions_create(NULL, r->input->cam.K, &r->own_masks));
+        r->masks = &r->own_masks;
+    }
+    const g3d_frame *f = r->input;
+    return g3d_layers_compute(&f->rgb, &f->depth, r->masks, r->inpainter, r->depth, &p->layers_params, p->seed,
+                              &r->layers);
+}
+
+/* ---- world ----------------------------------------------------------------------------------- */
+
+/* The trajectory's poses: a camera file, or a preset scaled by the input's median depth;
+ * then picked to steps + 1 poses when steps is given. */
+static g3d_status make_poses(const g3d_generate_params *p, const g3d_frame *f, g3d_mat4 **poses, int *n)
+{
+    g3d_status rc;
+    *poses = NULL;
+    *n = 0;
+    if (g3d_trajectory_is_file(p->trajectory)) {
+        g3d_camera *cams = NULL;
+        rc = g3d_trajectory_load(p->trajectory, &cams, n);
+        if (rc == G3D_OK && !(*poses = g3d_calloc((size_t)*n, sizeof **poses, "poses"))) rc = G3D_ERR_NOMEM;
+        for (int i = 0; rc == G3D_OK && i < *n; i++) (*poses)[i] = cams[i].c2w;
+        free(cams);
+    } else {
+        g3d_trajectory_params tp = p->trajectory_params;
+        if (p->steps > 0 && !strcmp(p->trajectory, "rotate")) tp.steps = p->steps;
+        rc = g3d_trajectory_make(p->trajectory, &tp, g3d_depth_median(&f->depth), poses, n);
+    }
+    if (rc == G3D_OK && p->steps > 0 && p->steps + 1 != *n) {
+        g3d_mat4 *picked;
+        rc = g3d_trajectory_pick(*poses, *n, p->steps + 1, &picked);
+        if (rc == G3D_OK) {
+            free(*poses);
+            *poses = picked;
+            *n = p->steps + 1;
+        }
+    }
+    if (rc != G3D_OK) {
+        free(*poses);
+        *poses = NULL;
+    }
+    return rc;
+}
+
+static g3d_status stage_world(run *r)
+{
+    const g3d_generate_params *p = r->p;
+    if (p->world_dir) {
+        G3D_TRY(g3d_world_load(p->world_dir, &r->world));
+        if (r->world.n_views + r->world.n_extra == 0) return G3D_ERR(G3D_ERR_FORMAT, "%s: the world has no views", p->world_dir);
+        g3d_log(G3D_LOG_INFO, "world %s: %lld points, %d views + %d extra", p->world_dir, (long long)r->world.cloud.n,
+                r->world.n_views, r->world.n_extra);
+        return G3D_OK;
+    }
+    const g3d_frame *f = r->input;
+    g3d_mat4 *poses;
+    int n;
+    G3D_TRY(make_poses(p, f, &poses, &n));
+    g3d_world_params wp = p->world;
+    wp.progress = r->progress;
+    g3d_log(G3D_LOG_INFO, "world: %s, %dx%d, %d poses (%s), %d extra views", f->name, f->rgb.w, f->rgb.h, n, p->trajectory,
+            wp.extra_views);
+    double t0 = g3d_time_now();
+    g3d_status rc = g3d_world_generate(f, poses, n, r->inpainter, r->depth, p->layers ? &r->layers : NULL, &wp, p->seed,
+                                       &r->world);
+    free(poses);
+    if (rc != G3D_OK) return rc;
+    g3d_log(G3D_LOG_INFO, "world: %lld points, %d views + %d extra, %d foreground objects, %.1f s", (long long)r->world.cloud.n,
+            r->world.n_views, r->world.n_extra, r->world.layers.n_foreground, g3d_time_now() - t0);
+    if (p->last_stage == G3D_STAGE_WORLD) return g3d_world_save(&r->world, p->output_dir, p->seed);
+    return G3D_OK;
+}
+
+/* ---- splats ---------------------------------------------------------------------------------- */
+
+/* The training views: every generated view whole, the extra views on their valid pixels. */
+static g3d_status train_views(const g3d_world *w, g3d_train_view **out, int *n)
+{
+    *n = w->n_views + w->n_extra;
+    g3d_train_view *v = g3d_calloc((size_t)*n, sizeof *v, "training views");
+    if (!v) return G3D_ERR_NOMEM;
+    for (int i = 0; i < w->n_views; i++) v[i] = (g3d_train_view){w->cams[i], &w->rgb[i], NULL};
+    for (int i = 0; i < w->n_extra; i++)
+        v[w->n_views + i] = (g3d_train_view){w->extra_cams[i], &w->extra_rgb[i], &w->extra_mask[i]};
+    *out = v;
+    return G3D_OK;
+}
+
+static g3d_status stage_splats(run *r)
+{
+    const g3d_generate_params *p = r->p;
+    const g3d_world *w = &r->world;
+    g3d_train_view *views = NULL;
+    int nviews = 0;
+    G3D_TRY(train_views(w, &views, &nviews));
+    g3d_status rc;
+    if (w->cloud.n > 0) {
+        rc = g3d_gaussians_init_from_points(&r->scene, w->cloud.xyz, w->cloud.rgb, w->cloud.n, p->sh_degree);
+    } else {
+        g3d_log(G3D_LOG_WARN, "no point cloud: starting from %d random points", G3D_RANDOM_INIT_POINTS);
+        rc = g3d_gaussians_init_random(&r->scene, views, nviews, G3D_RANDOM_INIT_POINTS, p->sh_degree, p->seed);
+    }
+    r->initial_gaussians = r->scene.n;
+    if (rc == G3D_OK) {
+        g3d_train_params tp = p->train;
+        tp.seed = p->seed;
+        tp.progress = r->progress;
+        rc = g3d_train(&r->scene, views, nviews, &tp, &r->train);
+    }
+    free(views);
+    if (rc == G3D_OK)
+        g3d_log(G3D_LOG_INFO, "splats: %d views, %lld -> %lld Gaussians, PSNR %.2f dB", nviews, (long long)r->initial_gaussians,
+                (long long)r->scene.n, r->train.last_psnr);
+    return rc;
+}
+
+/* ---- outputs --------------------------------------------------------------------------------- */
+
+/* Runs `call` with `path` = tmp/name (the macro keeps every file write one line). */
+#define WRITE(name, call)                                                                      \
+    do {                                                                                       \
+        char *path = g3d_path_join(r->tmp, name);                                              \
+        rc = path ? (call) : G3D_ERR(G3D_ERR_NOMEM, "out of memory");                          \
+        free(path);                                                                            \
+    } while (0)
+
+static g3d_status write_json(run *r, const char *name, cJSON *o)
+{
+    g3d_status rc;
+    char *text = cJSON_Print(o);
+    if (!text) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    WRITE(name, g3d_write_file_atomic(path, text, strlen(text)));
+    free(text);
+    return rc;
+}
+
+/* cameras.json, transforms.json and points.ply at the top of the folder (image paths under
+ * dataset/), so that the folder is itself a dataset for `gen3d train` and nerfstudio tools. */
+static g3d_status write_cameras(run *r)
+{
+    g3d_camera_list l;
+    g3d_points pts = {0};
+    G3D_TRY(g3d_world_cameras(&r->world, "dataset/", &l));
+    g3d_status rc;
+    WRITE("cameras.json", g3d_cameras_json_write(path, &l));
+    if (rc == G3D_OK) WRITE("transforms.json", g3d_transforms_json_write(path, &l));
+    if (rc == G3D_OK) rc = g3d_cloud_to_points(&r->world.cloud, &pts);
+    if (rc == G3D_OK) WRITE("points.ply", g3d_ply_write_points(path, &pts));
+    g3d_camera_list_free(&l);
+    g3d_points_free(&pts);
+    return rc;
+}
+
+/* The scene seen from the input camera. */
+static g3d_status write_preview(run *r)
+{
+    const g3d_camera *cam = &r->world.cams[0];
+    g3d_raster_ws *ws = NULL;
+    g3d_raster_params s;
+    g3d_raster_params_default(&s);
+    g3d_image img;
+    g3d_status rc = g3d_image_create(&img, cam->K.width, cam->K.height, 3);
+    if (rc != G3D_OK) return rc;
+    rc = g3d_raster_ws_create(&ws);
+    if (rc == G3D_OK) rc = g3d_raster_fwd(ws, &r->scene, cam, &s, img.data, NULL, NULL, NULL);
+    g3d_raster_ws_free(ws);
+    if (rc == G3D_OK) WRITE("preview.png", g3d_image_save_png(path, &img, 8));
+    g3d_image_free(&img);
+    return rc;
+}
+
+/* The fly-through: video.mp4, or PNG frames in frames/ when ffmpeg is missing. */
+static g3d_status write_video(run *r)
+{
+    const g3d_generate_params *p = r->p;
+    g3d_camera *cams = NULL;
+    int n = 0;
+    G3D_TRY(g3d_render_flythrough(p->video_trajectory, NULL, &r->scene, &r->world.cams[0], 0, p->video_frames, &cams, &n));
+    g3d_render_params rp;
+    g3d_render_params_default(&rp);
+    rp.progress = r->progress;
+    g3d_render_output_params out;
+    g3d_render_output_params_default(&out);
+    out.frames = 0;
+    out.cameras = 0;
+    out.video_params = p->video_params;
+    g3d_status rc = g3d_render_to_dir(&r->scene, cams, n, &rp, &out, r->tmp, &r->video);
+    free(cams);
+    return rc;
+}
+
+static cJSON *config_json(const run *r)
+{
+    const g3d_generate_params *p = r->p;
+    cJSON *c = cJSON_CreateObject();
+    if (p->world_dir) {
+        cJSON_AddStringToObject(c, "world", p->world_dir);
+    } else {
+        const g3d_frame *f = r->input;
+        cJSON_AddStringToObject(c, "input", f->name);
+        cJSON_AddNumberToObject(c, "width", f->rgb.w);
+        cJSON_AddNumberToObject(c, "height", f->rgb.h);
+        cJSON_AddNumberToObject(c, "fx", f->cam.K.fx);
+        cJSON_AddNumberToObject(c, "fy", f->cam.K.fy);
+        cJSON_AddNumberToObject(c, "cx", f->cam.K.cx);
+        cJSON_AddNumberToObject(c, "cy", f->cam.K.cy);
+    }
+    cJSON_AddNumberToObject(c, "seed", (double)p->seed);
+    if (!p->world_dir) {
+        cJSON_AddStringToObject(c, "trajectory", p->trajectory);
+        cJSON_AddNumberToObject(c, "steps", p->steps);
+        cJSON_AddNumberToObject(c, "angle", p->trajectory_params.angle_deg);
+        cJSON_AddNumberToObject(c, "distance", p->trajectory_params.distance);
+        cJSON_AddNumberToObject(c, "extra", p->world.extra_views);
+        cJSON_AddNumberToObject(c, "max_side", p->input.max_side);
+        cJSON_AddBoolToObject(c, "layers", p->layers);
+        cJSON_AddStringToObject(c, "inpainter", r->inpainter->name);
+        cJSON_AddStringToObject(c, "depth_estimator", r->depth->name);
+        if (p->layers) cJSON_AddStringToObject(c, "mask_provider", r->masks->name);
+        if (p->depth_model && !p->depth) cJSON_AddStringToObject(c, "depth_model", p->depth_model);
+    }
+    cJSON_AddNumberToObject(c, "iterations", (double)p->train.iterations);
+    cJSON_AddNumberToObject(c, "sh_degree", p->sh_degree);
+    cJSON_AddStringToObject(c, "video_trajectory", p->video_trajectory);
+    cJSON_AddNumberToObject(c, "video_frames", p->video_frames);
+    cJSON_AddNumberToObject(c, "fps", p->video_params.fps);
+    cJSON_AddBoolToObject(c, "video", p->video);
+    cJSON_AddNumberToObject(c, "threads", omp_get_max_threads());
+    return c;
+}
+
+static cJSON *summary_json(const g3d_generate_result *res)
+{
+    cJSON *s = cJSON_CreateObject();
+    cJSON_AddNumberToObject(s, "points", (double)res->points);
+    cJSON_AddNumberToObject(s, "views", res->views);
+    cJSON_AddNumberToObject(s, "extra_views", res->extra_views);
+    cJSON_AddNumberToObject(s, "foreground_objects", res->foreground_objects);
+    cJSON_AddNumberToObject(s, "initial_gaussians", (double)res->initial_gaussians);
+    cJSON_AddNumberToObject(s, "gaussians", (double)res->gaussians);
+    cJSON_AddNumberToObject(s, "train_loss", res->train_loss);
+    cJSON_AddNumberToObject(s, "train_psnr_db", res->train_psnr);
+    cJSON_AddBoolToObject(s, "video", res->video_written);
+    if (res->video_note) cJSON_AddStringToObject(s, "video_note", res->video_note);
+    cJSON_AddBoolToObject(s, "viewer", res->viewer_written);
+    char key[64];
+    for (int st = 0; st < G3D_STAGE_COUNT; st++) {
+        snprintf(key, sizeof key, "seconds_%s", g3d_stage_name((g3d_stage)st));
+        cJSON_AddNumberToObject(s, key, res->seconds[st]);
+    }
+    cJSON_AddNumberToObject(s, "seconds_total", res->seconds_total);
+    return s;
+}
+
+/* The figures of the result that the stages so far determine (the scene stays in the run). */
+static void collect(const run *r, g3d_generate_result *res)
+{
+    const g3d_world *w = &r->world;
+    res->width = r->input ? r->input->rgb.w : w->n_views ? w->rgb[0].w : 0;
+    res->height = r->input ? r->input->rgb.h : w->n_views ? w->rgb[0].h : 0;
+    res->views = w->n_views;
+    res->extra_views = w->n_extra;
+    res->foreground_objects = w->layers.n_foreground;
+    res->points = w->cloud.n;
+    res->initial_gaussians = r->initial_gaussians;
+    res->gaussians = r->scene.n;
+    res->train_loss = r->train.last_loss;
+    res->train_psnr = r->train.last_psnr;
+    res->video_written = r->video.video_written;
+    res->video_note = r->video.note;
+    res->viewer_written = r->viewer_written;
+}
+
+static g3d_status stage_outputs(run *r, g3d_generate_result *res, double t_start)
+{
+    const g3d_generate_params *p = r->p;
+    if (!r->tmp) return G3D_OK;
+    double t0 = g3d_time_now();
+    g3d_status rc;
+    WRITE("dataset", g3d_world_save(&r->world, path, p->seed));
+    if (rc == G3D_OK) rc = write_cameras(r);
+    if (rc == G3D_OK) WRITE("scene.ply", g3d_ply_write_gaussians(path, &r->scene));
+    if (rc == G3D_OK) WRITE("scene.spz", g3d_spz_save(path, &r->scene));
+    if (rc == G3D_OK) rc = check_cancel(r);
+    if (rc == G3D_OK) rc = write_preview(r);
+    if (rc == G3D_OK && p->video) rc = write_video(r);
+    if (rc == G3D_OK)
+        rc = g3d_viewer_write_generated(r->tmp, &r->scene, r->world.cams, r->world.n_views,
+                                        p->video ? p->video_trajectory : NULL, p->video_frames,
+                                        p->video_params.fps, &r->viewer_written);
+    collect(r, res);
+    cJSON *c = rc == G3D_OK ? config_json(r) : NULL;
+    if (c) rc = write_json(r, "config.json", c);
+    cJSON_Delete(c);
+    res->seconds[G3D_STAGE_OUTPUTS] = g3d_time_now() - t0;   /* so far: the summary is the last file */
+    res->seconds_total = g3d_time_now() - t_start;
+    cJSON *s = rc == G3D_OK ? summary_json(res) : NULL;
+    if (s) rc = write_json(r, "summary.json", s);
+    cJSON_Delete(s);
+    return rc;
+}
+
+#undef WRITE
+
+/* ---- the run --------------------------------------------------------------------------------- */
+
+static void run_free(run *r)
+{
+    g3d_frame_free(&r->frame);
+    g3d_layers_free(&r->layers);
+    g3d_world_free(&r->world);
+    g3d_gaussians_free(&r->scene);
+    g3d_inpainter_free(&r->own_inpainter);
+    g3d_depth_estimator_free(&r->own_depth);
+    g3d_mask_provider_free(&r->own_masks);
+    if (r->tmp) g3d_atomic_dir_abort(r->tmp);
+    free(r->tmp);
+}
+
+g3d_status g3d_generate(const g3d_generate_params *p, g3d_generate_result *res_out)
+{
+    g3d_generate_result res;
+    run r;
+    memset(&res, 0, sizeof res);
+    memset(&r, 0, sizeof r);
+    if (res_out) memset(res_out, 0, sizeof *res_out);
+    r.p = p;
+    r.progress = (g3d_progress){report, (void *)p};
+    g3d_status rc = check_params(p);
+    /* claim the output folder first, so that a bad one fails before minutes of work */
+    if (rc == G3D_OK && p->output_dir && p->last_stage == G3D_STAGE_OUTPUTS) rc = g3d_atomic_dir_begin(p->output_dir, &r.tmp);
+    double t_start = g3d_time_now(), t;
+    /* the stages in order; a run from a saved world starts at the world stage, which loads it */
+    for (int st = p->world_dir ? G3D_STAGE_WORLD : G3D_STAGE_INPUT; st <= (int)p->last_stage && rc == G3D_OK; st++) {
+        t = g3d_time_now();
+        switch ((g3d_stage)st) {
+        case G3D_STAGE_INPUT: rc = stage_input(&r); break;
+        case G3D_STAGE_LAYERS: rc = stage_layers(&r); break;
+        case G3D_STAGE_WORLD: rc = stage_world(&r); break;
+        case G3D_STAGE_SPLATS: rc = stage_splats(&r); break;
+        case G3D_STAGE_OUTPUTS: rc = stage_outputs(&r, &res, t_start); break;
+        default: rc = G3D_ERR(G3D_ERR_INTERNAL, "generate: no stage %d", st);
+        }
+        res.seconds[st] = g3d_time_now() - t;
+        if (rc == G3D_OK) rc = check_cancel(&r);
+    }
+    if (rc == G3D_OK && r.tmp) rc = g3d_atomic_dir_commit(r.tmp, p->output_dir);
+    res.seconds_total = g3d_time_now() - t_start;
+    if (rc == G3D_OK) {
+        collect(&r, &res);
+        res.scene = r.scene;
+        memset(&r.scene, 0, sizeof r.scene);
+    }
+    run_free(&r);
+    if (rc == G3D_OK && res_out) *res_out = res;
+    else g3d_gaussians_free(&res.scene);
+    return rc;
+}
