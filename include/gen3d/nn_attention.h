@@ -59,8 +59,9 @@ typedef struct g3d_nn_bias_dense {
 void g3d_nn_bias_dense_fn(void *ctx, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks);
 
 /* SAM's decomposed relative positions: queries and keys on grids qh x qw and kh x kw (token
- * index y*width + x); bias(h, q, k) = rh[(h*nq + q)*kh + ky] + rw[(h*nq + q)*kw + kx] with
- * (ky, kx) the key's grid position. Fill the tables with g3d_nn_relpos_tables. */
+ * index y*width + x); bias(h, q, k) = rh[(h*kh + ky)*nq + q] + rw[(h*kw + kx)*nq + q] with
+ * (ky, kx) the key's grid position (tables key-major: the attention adds them a key at a
+ * time across 64 queries). Fill them with g3d_nn_relpos_tables. */
 typedef struct g3d_nn_bias_relpos {
     const float *rh, *rw;
     int nq, kh, kw;
@@ -69,7 +70,7 @@ void g3d_nn_bias_relpos_fn(void *ctx, int head, int q0, int nq, int k0, int nk, 
 
 /* SAM's add_decomposed_rel_pos tables from the unscaled queries q (head h at column h*hd, row
  * stride ldq) on a square-cell grid qh x qw attending to kh x kw (equal sizes, as in SAM's
- * image encoder): rh [heads, qh*qw, kh], rw [heads, qh*qw, kw], with rel_h [2*kh-1, hd] and
+ * image encoder): rh [heads, kh, qh*qw], rw [heads, kw, qh*qw], with rel_h [2*kh-1, hd] and
  * rel_w [2*kw-1, hd] the checkpoint's rel_pos_h / rel_pos_w. G3D_ERR_UNSUPPORTED when the
  * sizes differ (the official code would interpolate the tables). */
 g3d_status g3d_nn_relpos_tables(const float *q, long ldq, int heads, int hd, int qh, int qw, int kh, int kw,

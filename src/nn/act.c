@@ -39,7 +39,7 @@ INLINE vf vexp2(vf t)
     p = p * r + 2.4022120237e-1f;
     p = p * r + 6.9314694405e-1f;
     p = p * r + 1.0000001192f;
-    vf y = (vf)((vi)p + (vi)((vu)n << 23));
+    vf y = (vf)((vu)p + ((vu)n << 23)); /* unsigned: a negative n wraps as intended */
     return vsel(under, splat(0.0f), y);
 }
 
@@ -135,20 +135,35 @@ CLONES void nn_exp_rows(float *s, long lds, int rows, const float *m, float *sum
 
 CLONES void nn_online_softmax(float *s, long lds, int rows, int n, float *m, float *l, float *corr)
 {
-    for (int i = 0; i < n; i += 16) {
-        vf mold = *(const vfu *)(m + i), mx = mold;
-        for (int r = 0; r < rows; r++) mx = vmax(mx, *(const vfu *)(s + r * lds + i));
-        /* a column that has seen only -inf keeps m = -inf and subtracts 0 instead */
-        vf meff = vsel(mx == -INFINITY, splat(0.0f), mx) * 1.44269504088896341f;
-        vf c = vexp2(mold * 1.44269504088896341f - meff), acc = *(const vfu *)(l + i) * c;
-        for (int r = 0; r < rows; r++) {
-            vf e = vexp2(*(const vfu *)(s + r * lds + i) * 1.44269504088896341f - meff);
-            *(vfu *)(s + r * lds + i) = e;
-            acc += e;
+    for (int i0 = 0; i0 < n; i0 += 64) {
+        /* column maxima: up to 4 vectors side by side and two rows at a time, so the max
+         * instructions do not wait on one another */
+        const int nv = (n - i0) / 16 < 4 ? (n - i0) / 16 : 4;
+        vf mx[4], mx2[4];
+        for (int v = 0; v < nv; v++) mx[v] = mx2[v] = *(const vfu *)(m + i0 + 16 * v);
+        int r = 0;
+        for (; r + 2 <= rows; r += 2)
+            for (int v = 0; v < nv; v++) {
+                mx[v] = vmax(mx[v], *(const vfu *)(s + r * lds + i0 + 16 * v));
+                mx2[v] = vmax(mx2[v], *(const vfu *)(s + (r + 1) * lds + i0 + 16 * v));
+            }
+        for (; r < rows; r++)
+            for (int v = 0; v < nv; v++) mx[v] = vmax(mx[v], *(const vfu *)(s + r * lds + i0 + 16 * v));
+        for (int v = 0; v < nv; v++) {
+            const int i = i0 + 16 * v;
+            vf mnew = vmax(mx[v], mx2[v]);
+            /* a column that has seen only -inf keeps m = -inf and subtracts 0 instead */
+            vf meff = vsel(mnew == -INFINITY, splat(0.0f), mnew) * 1.44269504088896341f;
+            vf c = vexp2(*(const vfu *)(m + i) * 1.44269504088896341f - meff), acc = *(const vfu *)(l + i) * c;
+            for (int q = 0; q < rows; q++) {
+                vf e = vexp2(*(const vfu *)(s + q * lds + i) * 1.44269504088896341f - meff);
+                *(vfu *)(s + q * lds + i) = e;
+                acc += e;
+            }
+            *(vfu *)(m + i) = mnew;
+            *(vfu *)(l + i) = acc;
+            *(vfu *)(corr + i) = c;
         }
-        *(vfu *)(m + i) = mx;
-        *(vfu *)(l + i) = acc;
-        *(vfu *)(corr + i) = c;
     }
 }
 

@@ -16,7 +16,7 @@
 #include <string.h>
 
 #define QB 64  /* queries per task */
-#define KB 192 /* keys per block */
+#define KB 240 /* most keys per block (blocks are balanced: 196 keys are one block) */
 
 static int rup6(int x) { return (x + NN_MR - 1) / NN_MR * NN_MR; }
 
@@ -38,8 +38,9 @@ static void task(const g3d_nn_attn *a, const tiles *T, int h, int q0)
     const int shift = a->nk - a->nq;
     int kend = a->nk;
     if (a->causal && q0 + nqv - 1 + shift + 1 < kend) kend = q0 + nqv + shift;
-    for (int k0 = 0; k0 < kend; k0 += KB) {
-        const int kb = kend - k0 < KB ? kend - k0 : KB;
+    const int nkb = (kend + KB - 1) / KB, kbs = nkb ? (kend + nkb - 1) / nkb : 0;
+    for (int k0 = 0; k0 < kend; k0 += kbs) {
+        const int kb = kend - k0 < kbs ? kend - k0 : kbs;
         for (int r = 0; r < kb; r += NN_MR) {
             const float *ka = a->k + (long)(k0 + r) * a->ldk + h * hd;
             long lda = a->ldk;
@@ -141,19 +142,24 @@ g3d_status g3d_nn_attention(const float *qkv, int n, int heads, int hd, float sc
 void g3d_nn_bias_dense_fn(void *ctx, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks)
 {
     const g3d_nn_bias_dense *d = ctx;
-    for (int j = 0; j < nk; j++) {
-        const float *b = d->b + head * d->head_stride + (long)q0 * d->ld + k0 + j;
-        for (int i = 0; i < nq; i++) s[i * qs + j * ks] += b[(long)i * d->ld];
+    for (int i = 0; i < nq; i++) {
+        const float *b = d->b + head * d->head_stride + (long)(q0 + i) * d->ld + k0;
+        for (int j = 0; j < nk; j++) s[i * qs + j * ks] += b[j];
     }
 }
 
 void g3d_nn_bias_relpos_fn(void *ctx, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks)
 {
     const g3d_nn_bias_relpos *r = ctx;
-    const float *rh = r->rh + ((long)head * r->nq + q0) * r->kh, *rw = r->rw + ((long)head * r->nq + q0) * r->kw;
+    /* tables are key-major, so the queries of one key are contiguous like the tile's columns */
+    const float *rh = r->rh + (long)head * r->kh * r->nq + q0, *rw = r->rw + (long)head * r->kw * r->nq + q0;
     for (int j = 0; j < nk; j++) {
-        int ky = (k0 + j) / r->kw, kx = (k0 + j) % r->kw;
-        for (int i = 0; i < nq; i++) s[i * qs + j * ks] += rh[(long)i * r->kh + ky] + rw[(long)i * r->kw + kx];
+        const float *h = rh + (long)((k0 + j) / r->kw) * r->nq, *w = rw + (long)((k0 + j) % r->kw) * r->nq;
+        float *sj = s + j * ks;
+        if (qs == 1)
+            for (int i = 0; i < nq; i++) sj[i] += h[i] + w[i];
+        else
+            for (int i = 0; i < nq; i++) sj[i * qs] += h[i] + w[i];
     }
 }
 
@@ -172,13 +178,13 @@ g3d_status g3d_nn_relpos_tables(const float *q, long ldq, int heads, int hd, int
             const float *r = rel_h + (long)(qy - ky + kh - 1) * hd;
             float s = 0;
             for (int c = 0; c < hd; c++) s += qi[c] * r[c];
-            rh[t * kh + ky] = s;
+            rh[((long)h * kh + ky) * nq + i] = s;
         }
         for (int kx = 0; kx < kw; kx++) {
             const float *r = rel_w + (long)(qx - kx + kw - 1) * hd;
             float s = 0;
             for (int c = 0; c < hd; c++) s += qi[c] * r[c];
-            rw[t * kw + kx] = s;
+            rw[((long)h * kw + kx) * nq + i] = s;
         }
     }
     return G3D_OK;

@@ -198,10 +198,11 @@ static void epilogue(const nn_gemm *g, float *ct, long ldc, int m0, int mt, int 
             else
                 memcpy(y + n0, v, sizeof(float) * nt);
         } else {
+            int qy = n0 / g->qw, qx = n0 % g->qw;
             for (int j = 0; j < nt; j++) {
-                int col = n0 + j;
-                long off = (col / g->qw) * g->oys + (col % g->qw) * g->oxs + g->ooff;
+                long off = qy * g->oys + qx * g->oxs + g->ooff;
                 y[off] = r ? r[off] + v[j] : v[j];
+                if (++qx == g->qw) qx = 0, qy++;
             }
         }
     }
