@@ -82,14 +82,20 @@ static g3d_status check(int c, int h, int w, const char *what)
     return G3D_OK;
 }
 
-g3d_status g3d_nn_rfft2(const float *x, int c, int h, int w, float *y)
+/* Runs one channel at a time over the OpenMP team, each thread with FFTW-aligned buffers of
+ * a real plane and a half spectrum. */
+typedef struct job {
+    fftwf_plan p, p2;
+    const float *in;
+    float *out;
+    int h, w;
+    float scale;
+} job;
+
+static g3d_status per_channel(const job *j, int c, void (*fn)(const job *, int, float *, fftwf_complex *),
+                              const char *what)
 {
-    G3D_TRY(check(c, h, w, "rfft2"));
-    const int wf = w / 2 + 1;
-    const size_t n = (size_t)h * w, nf = (size_t)h * wf;
-    fftwf_plan p = get_plan(FWD, h, w);
-    if (!p) return G3D_ERR(G3D_ERR_NOMEM, "rfft2: cannot plan a %dx%d transform", w, h);
-    const float s = 1.0f / sqrtf((float)n);
+    const size_t n = (size_t)j->h * j->w, nf = (size_t)j->h * (j->w / 2 + 1);
     int failed = 0;
 #pragma omp parallel
     {
@@ -100,51 +106,48 @@ g3d_status g3d_nn_rfft2(const float *x, int c, int h, int w, float *y)
             failed = 1;
         }
 #pragma omp for schedule(dynamic, 1)
-        for (int ch = 0; ch < c; ch++) {
-            if (!re || !cx) continue;
-            memcpy(re, x + ch * n, sizeof(float) * n);
-            fftwf_execute_dft_r2c(p, re, cx);
-            float *yr = y + 2 * ch * nf, *yi = yr + nf;
-            for (size_t i = 0; i < nf; i++) yr[i] = cx[i][0] * s, yi[i] = cx[i][1] * s;
-        }
+        for (int ch = 0; ch < c; ch++)
+            if (re && cx) fn(j, ch, re, cx);
         fftwf_free(re);
         fftwf_free(cx);
     }
-    if (failed) return G3D_ERR(G3D_ERR_NOMEM, "rfft2: cannot allocate %dx%d buffers", w, h);
+    if (failed) return G3D_ERR(G3D_ERR_NOMEM, "%s: cannot allocate %dx%d buffers", what, j->w, j->h);
     return G3D_OK;
+}
+
+static void forward_one(const job *j, int ch, float *re, fftwf_complex *cx)
+{
+    const size_t n = (size_t)j->h * j->w, nf = (size_t)j->h * (j->w / 2 + 1);
+    memcpy(re, j->in + ch * n, sizeof(float) * n);
+    fftwf_execute_dft_r2c(j->p, re, cx);
+    float *yr = j->out + 2 * ch * nf, *yi = yr + nf;
+    for (size_t i = 0; i < nf; i++) yr[i] = cx[i][0] * j->scale, yi[i] = cx[i][1] * j->scale;
+}
+
+static void inverse_one(const job *j, int ch, float *re, fftwf_complex *cx)
+{
+    const size_t n = (size_t)j->h * j->w, nf = (size_t)j->h * (j->w / 2 + 1);
+    const float *yr = j->in + 2 * ch * nf, *yi = yr + nf;
+    for (size_t i = 0; i < nf; i++) cx[i][0] = yr[i] * j->scale, cx[i][1] = yi[i] * j->scale;
+    fftwf_execute_dft(j->p, cx, cx);
+    fftwf_execute_dft_c2r(j->p2, cx, re);
+    memcpy(j->out + ch * n, re, sizeof(float) * n);
+}
+
+g3d_status g3d_nn_rfft2(const float *x, int c, int h, int w, float *y)
+{
+    G3D_TRY(check(c, h, w, "rfft2"));
+    job j = {get_plan(FWD, h, w), NULL, x, y, h, w, 1.0f / sqrtf((float)h * w)};
+    if (!j.p) return G3D_ERR(G3D_ERR_NOMEM, "rfft2: cannot plan a %dx%d transform", w, h);
+    return per_channel(&j, c, forward_one, "rfft2");
 }
 
 g3d_status g3d_nn_irfft2(const float *y, int c, int h, int w, float *x)
 {
     G3D_TRY(check(c, h, w, "irfft2"));
-    const int wf = w / 2 + 1;
-    const size_t n = (size_t)h * w, nf = (size_t)h * wf;
-    fftwf_plan pc = get_plan(INV_COLS, h, w), pr = get_plan(INV_ROWS, h, w);
-    if (!pc || !pr) return G3D_ERR(G3D_ERR_NOMEM, "irfft2: cannot plan a %dx%d transform", w, h);
-    const float s = 1.0f / sqrtf((float)n);
-    int failed = 0;
-#pragma omp parallel
-    {
-        float *re = fftwf_malloc(sizeof(float) * n);
-        fftwf_complex *cx = fftwf_malloc(sizeof(fftwf_complex) * nf);
-        if (!re || !cx) {
-#pragma omp atomic write
-            failed = 1;
-        }
-#pragma omp for schedule(dynamic, 1)
-        for (int ch = 0; ch < c; ch++) {
-            if (!re || !cx) continue;
-            const float *yr = y + 2 * ch * nf, *yi = yr + nf;
-            for (size_t i = 0; i < nf; i++) cx[i][0] = yr[i] * s, cx[i][1] = yi[i] * s;
-            fftwf_execute_dft(pc, cx, cx);
-            fftwf_execute_dft_c2r(pr, cx, re);
-            memcpy(x + ch * n, re, sizeof(float) * n);
-        }
-        fftwf_free(re);
-        fftwf_free(cx);
-    }
-    if (failed) return G3D_ERR(G3D_ERR_NOMEM, "irfft2: cannot allocate %dx%d buffers", w, h);
-    return G3D_OK;
+    job j = {get_plan(INV_COLS, h, w), get_plan(INV_ROWS, h, w), y, x, h, w, 1.0f / sqrtf((float)h * w)};
+    if (!j.p || !j.p2) return G3D_ERR(G3D_ERR_NOMEM, "irfft2: cannot plan a %dx%d transform", w, h);
+    return per_channel(&j, c, inverse_one, "irfft2");
 }
 
 /* ---- reference: the DFT sums in double, O(n^2) per channel ------------------------------- */

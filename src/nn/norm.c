@@ -105,19 +105,24 @@ void g3d_nn_layernorm2d(const float *x, int c, int hw, const float *g, const flo
     }
 }
 
+/* Mean and 1/sqrt(var + eps) of n values spaced `stride` apart, in double. */
+static void ref_stats(const float *x, size_t n, size_t stride, float eps, double *mean, double *inv)
+{
+    double m = 0, v = 0;
+    for (size_t i = 0; i < n; i++) m += x[i * stride];
+    m /= n;
+    for (size_t i = 0; i < n; i++) v += (x[i * stride] - m) * (x[i * stride] - m);
+    *mean = m;
+    *inv = 1.0 / sqrt(v / n + eps);
+}
+
 void nn_ref_groupnorm(const float *x, int c, int hw, int groups, const float *g, const float *b, float eps, g3d_act act,
                       float *y)
 {
     const int cg = c / groups;
     for (int gr = 0; gr < groups; gr++) {
-        const float *xg = x + (size_t)gr * cg * hw;
-        size_t n = (size_t)cg * hw;
-        double m = 0, v = 0;
-        for (size_t i = 0; i < n; i++) m += xg[i];
-        m /= n;
-        for (size_t i = 0; i < n; i++) v += (xg[i] - m) * (xg[i] - m);
-        v /= n;
-        double inv = 1.0 / sqrt(v + eps);
+        double m, inv;
+        ref_stats(x + (size_t)gr * cg * hw, (size_t)cg * hw, 1, eps, &m, &inv);
         for (int cc = 0; cc < cg; cc++) {
             int ch = gr * cg + cc;
             for (int i = 0; i < hw; i++) {
@@ -131,12 +136,8 @@ void nn_ref_groupnorm(const float *x, int c, int hw, int groups, const float *g,
 void nn_ref_layernorm2d(const float *x, int c, int hw, const float *g, const float *b, float eps, float *y)
 {
     for (int p = 0; p < hw; p++) {
-        double m = 0, v = 0;
-        for (int ch = 0; ch < c; ch++) m += x[(size_t)ch * hw + p];
-        m /= c;
-        for (int ch = 0; ch < c; ch++) v += (x[(size_t)ch * hw + p] - m) * (x[(size_t)ch * hw + p] - m);
-        v /= c;
-        double inv = 1.0 / sqrt(v + eps);
+        double m, inv;
+        ref_stats(x + p, c, hw, eps, &m, &inv);
         for (int ch = 0; ch < c; ch++) y[(size_t)ch * hw + p] = (float)((x[(size_t)ch * hw + p] - m) * inv * g[ch] + b[ch]);
     }
 }
@@ -145,12 +146,8 @@ void nn_ref_layernorm(const float *x, int n, int c, const float *g, const float 
 {
     for (int i = 0; i < n; i++) {
         const float *xi = x + (size_t)i * c;
-        double mean = 0, var = 0;
-        for (int j = 0; j < c; j++) mean += xi[j];
-        mean /= c;
-        for (int j = 0; j < c; j++) var += (xi[j] - mean) * (xi[j] - mean);
-        var /= c;
-        double inv = 1.0 / sqrt(var + eps);
-        for (int j = 0; j < c; j++) y[(size_t)i * c + j] = (float)((xi[j] - mean) * inv) * g[j] + b[j];
+        double m, inv;
+        ref_stats(xi, c, 1, eps, &m, &inv);
+        for (int j = 0; j < c; j++) y[(size_t)i * c + j] = (float)((xi[j] - m) * inv) * g[j] + b[j];
     }
 }
