@@ -153,8 +153,9 @@ static void conv_fn(void *p)
     check(g3d_nn_conv_forward(&c->c, c->x, c->h, c->w, c->y, NULL));
 }
 
+/* prepare: g3d_nn_conv_prepare first (Winograd for 3x3 stride 1, phase kernels for transposed) */
 static void conv(const char *name, int cin, int cout, int k, int stride, int pad, int h, int w, int groups,
-                 g3d_nn_padmode mode, int transposed, int opad)
+                 g3d_nn_padmode mode, int transposed, int opad, int prepare)
 {
     if (g_filter && !strstr(name, g_filter)) return;
     conv_case c = {.h = h, .w = w};
@@ -162,14 +163,15 @@ static void conv(const char *name, int cin, int cout, int k, int stride, int pad
     float *wt = rnd(nw, 0.05f), *b = rnd(cout, 0.1f);
     c.c = g3d_nn_conv_make(cin, cout, k, stride, pad, wt, b);
     c.c.groups = groups, c.c.pad_mode = mode, c.c.transposed = transposed, c.c.output_padding = opad;
-    check(g3d_nn_conv_prepare(&c.c));
+    if (prepare) check(g3d_nn_conv_prepare(&c.c));
     int ho, wo;
     check(g3d_nn_conv_out_size(&c.c, h, w, &ho, &wo));
     c.x = rnd((size_t)cin * h * w, 1.0f), c.y = malloc(sizeof(float) * (size_t)cout * ho * wo);
     double flops = transposed ? 2.0 * cin * cout * k * k * h * w : 2.0 * cout * (cin / groups) * k * k * ho * wo;
     char shape[64];
-    snprintf(shape, sizeof shape, "%s%dx%dx%d -> %d k%d s%d%s", transposed ? "T " : "", cin, h, w, cout, k, stride,
-             groups > 1 ? " dw" : mode == G3D_PAD_REFLECT ? " reflect" : mode == G3D_PAD_REPLICATE ? " repl" : "");
+    snprintf(shape, sizeof shape, "%s%dx%dx%d -> %d k%d s%d%s%s", transposed ? "T " : "", cin, h, w, cout, k, stride,
+             groups > 1 ? " dw" : mode == G3D_PAD_REFLECT ? " reflect" : mode == G3D_PAD_REPLICATE ? " repl" : "",
+             c.c.prep && !transposed ? " wino" : "");
     run(name, shape, flops, conv_fn, &c);
     g3d_nn_conv_release(&c.c);
     free(wt), free(b), free(c.x), free(c.y);
@@ -246,23 +248,33 @@ int main(int argc, char **argv)
     attn("attention sam-b global", 4096, 4096, 12, 64, 1, 1, 64);
     attn("attention vae mid", 4096, 4096, 1, 512, 1, 0, 0);
 
-    conv("conv3 sd 64x64x320", 320, 320, 3, 1, 1, 64, 64, 1, G3D_PAD_ZEROS, 0, 0);
-    conv("conv3 sd 32x32x640", 640, 640, 3, 1, 1, 32, 32, 1, G3D_PAD_ZEROS, 0, 0);
-    conv("conv3 sd 16x16x1280", 1280, 1280, 3, 1, 1, 16, 16, 1, G3D_PAD_ZEROS, 0, 0);
-    conv("conv3 sd down s2", 320, 320, 3, 2, 1, 64, 64, 1, G3D_PAD_ZEROS, 0, 0);
-    conv("conv3 vae 256x256x256", 256, 256, 3, 1, 1, 256, 256, 1, G3D_PAD_ZEROS, 0, 0);
-    conv("conv3 vae 512x512x128", 128, 128, 3, 1, 1, 512, 512, 1, G3D_PAD_ZEROS, 0, 0);
-    conv("conv3 lama l2l 128", 128, 128, 3, 1, 1, 64, 64, 1, G3D_PAD_REFLECT, 0, 0);
-    conv("conv3 lama g2l 384->128", 384, 128, 3, 1, 1, 64, 64, 1, G3D_PAD_REFLECT, 0, 0);
-    conv("conv3 lama l2g 128->384", 128, 384, 3, 1, 1, 64, 64, 1, G3D_PAD_REFLECT, 0, 0);
-    conv("conv3 dpt-s 64 @148", 64, 64, 3, 1, 1, 148, 148, 1, G3D_PAD_ZEROS, 0, 0);
-    conv("conv3 moge 128 repl", 128, 128, 3, 1, 1, 160, 160, 1, G3D_PAD_REPLICATE, 0, 0);
-    conv("conv1 sd proj 320", 320, 320, 1, 1, 0, 64, 64, 1, G3D_PAD_ZEROS, 0, 0);
-    conv("conv1 lama fu 384", 384, 384, 1, 1, 0, 64, 33, 1, G3D_PAD_ZEROS, 0, 0);
-    conv("conv dw3 tinyvit 256", 256, 256, 3, 1, 1, 256, 256, 256, G3D_PAD_ZEROS, 0, 0);
-    conv("convT lama k3s2 512->256", 512, 256, 3, 2, 1, 64, 64, 1, G3D_PAD_ZEROS, 1, 1);
-    conv("convT sam k2s2 256->64", 256, 64, 2, 2, 0, 64, 64, 1, G3D_PAD_ZEROS, 1, 0);
-    conv("convT dpt k4s4 48", 384, 48, 4, 4, 0, 37, 37, 1, G3D_PAD_ZEROS, 1, 0);
+    /* 3x3: implicit GEMM (as called without preparing), then prepared (Winograd F(2x2, 3x3)) */
+    for (int prep = 0; prep < 2; prep++) {
+        const char *const names[2][11] = {
+            {"conv3 sd 64x64x320", "conv3 sd 32x32x640", "conv3 sd 16x16x1280", "conv3 vae 256x256x256",
+             "conv3 vae 512x512x128", "conv3 lama l2l 128", "conv3 lama g2l 384->128", "conv3 lama l2g 128->384",
+             "conv3 dpt-s 64 @148", "conv3 moge 128 repl", "conv3 sd down s2"},
+            {"conv3w sd 64x64x320", "conv3w sd 32x32x640", "conv3w sd 16x16x1280", "conv3w vae 256x256x256",
+             "conv3w vae 512x512x128", "conv3w lama l2l 128", "conv3w lama g2l 384->128", "conv3w lama l2g 128->384",
+             "conv3w dpt-s 64 @148", "conv3w moge 128 repl", NULL}};
+        conv(names[prep][0], 320, 320, 3, 1, 1, 64, 64, 1, G3D_PAD_ZEROS, 0, 0, prep);
+        conv(names[prep][1], 640, 640, 3, 1, 1, 32, 32, 1, G3D_PAD_ZEROS, 0, 0, prep);
+        conv(names[prep][2], 1280, 1280, 3, 1, 1, 16, 16, 1, G3D_PAD_ZEROS, 0, 0, prep);
+        conv(names[prep][3], 256, 256, 3, 1, 1, 256, 256, 1, G3D_PAD_ZEROS, 0, 0, prep);
+        conv(names[prep][4], 128, 128, 3, 1, 1, 512, 512, 1, G3D_PAD_ZEROS, 0, 0, prep);
+        conv(names[prep][5], 128, 128, 3, 1, 1, 64, 64, 1, G3D_PAD_REFLECT, 0, 0, prep);
+        conv(names[prep][6], 384, 128, 3, 1, 1, 64, 64, 1, G3D_PAD_REFLECT, 0, 0, prep);
+        conv(names[prep][7], 128, 384, 3, 1, 1, 64, 64, 1, G3D_PAD_REFLECT, 0, 0, prep);
+        conv(names[prep][8], 64, 64, 3, 1, 1, 148, 148, 1, G3D_PAD_ZEROS, 0, 0, prep);
+        conv(names[prep][9], 128, 128, 3, 1, 1, 160, 160, 1, G3D_PAD_REPLICATE, 0, 0, prep);
+        if (names[prep][10]) conv(names[prep][10], 320, 320, 3, 2, 1, 64, 64, 1, G3D_PAD_ZEROS, 0, 0, prep);
+    }
+    conv("conv1 sd proj 320", 320, 320, 1, 1, 0, 64, 64, 1, G3D_PAD_ZEROS, 0, 0, 0);
+    conv("conv1 lama fu 384", 384, 384, 1, 1, 0, 64, 33, 1, G3D_PAD_ZEROS, 0, 0, 0);
+    conv("conv dw3 tinyvit 256", 256, 256, 3, 1, 1, 256, 256, 256, G3D_PAD_ZEROS, 0, 0, 0);
+    conv("convT lama k3s2 512->256", 512, 256, 3, 2, 1, 64, 64, 1, G3D_PAD_ZEROS, 1, 1, 1);
+    conv("convT sam k2s2 256->64", 256, 64, 2, 2, 0, 64, 64, 1, G3D_PAD_ZEROS, 1, 0, 1);
+    conv("convT dpt k4s4 48", 384, 48, 4, 4, 0, 37, 37, 1, G3D_PAD_ZEROS, 1, 0, 1);
 
     misc("groupnorm+silu vae", "128 x 512x512, 32 groups", 0, 128, 512, 512);
     misc("layernorm sam-b", "4096 x 768", 1, 768, 4096, 1);

@@ -68,6 +68,24 @@ TEST(conv2d)
         compare(cases[i].name, y, (int64_t)cout * ho * wo);
         free(w), free(b), free(y);
     }
+    /* prepared: Winograd F(2x2, 3x3) */
+    float *x16 = get("x16", NULL), y16[18 * 9 * 11];
+    static const char *const wn16[] = {"w3", "w3_reflect"};
+    for (int i = 0; i < 2; i++) {
+        char wn[64], bn[64];
+        snprintf(wn, sizeof wn, "%s_w", wn16[i]);
+        snprintf(bn, sizeof bn, "%s_b", wn16[i]);
+        float *w = get(wn, NULL), *b = get(bn, NULL);
+        g3d_nn_conv c = g3d_nn_conv_make(24, 18, 3, 1, 1, w, b);
+        c.pad_mode = i ? G3D_PAD_REFLECT : G3D_PAD_ZEROS;
+        CHECK_OK(g3d_nn_conv_prepare(&c));
+        CHECK(c.prep != NULL);
+        CHECK_OK(g3d_nn_conv_forward(&c, x16, 9, 11, y16, NULL));
+        compare(wn16[i], y16, 18 * 9 * 11);
+        g3d_nn_conv_release(&c);
+        free(w), free(b);
+    }
+    free(x16);
     /* kernel 3 x 1, padding (1, 0), no bias */
     float *w = get("k31_w", NULL), y[5 * 9 * 11];
     g3d_nn_conv c = {.cin = 6, .cout = 5, .kh = 3, .kw = 1, .pad_h = 1, .w = w};

@@ -257,6 +257,7 @@ g3d_status g3d_nn_conv_forward(const g3d_nn_conv *c, const float *x, int h, int 
         convt_prep_free(p);
         return rc;
     }
+    if (c->prep) return nn_wino_forward(c, c->prep, x, h, w, ho, wo, y, epi);
     const int G = one(c->groups), s = one(c->stride), d = one(c->dilation);
     if (G > 1 && G == c->cin && G == c->cout) return depthwise(c, x, h, w, ho, wo, y, epi);
     const int cg = c->cin / G, og = c->cout / G, K = cg * c->kh * c->kw, kk = c->kh * c->kw;
@@ -296,19 +297,27 @@ g3d_status g3d_nn_conv_forward(const g3d_nn_conv *c, const float *x, int h, int 
 
 g3d_status g3d_nn_conv_prepare(g3d_nn_conv *c)
 {
-    if (!c->transposed || c->prep) return G3D_OK;
+    if (c->prep) return G3D_OK;
     int ho, wo;
-    /* validates the configuration; the input size does not matter here */
-    G3D_TRY(g3d_nn_conv_out_size(c, c->kh + 1, c->kw + 1, &ho, &wo));
-    convt_prep *p;
-    G3D_TRY(convt_build(c, &p));
-    c->prep = p;
+    /* validates the configuration; the input size does not matter here (reflect needs pad < size) */
+    G3D_TRY(g3d_nn_conv_out_size(c, c->kh + c->pad_h + 1, c->kw + c->pad_w + 1, &ho, &wo));
+    if (c->transposed) {
+        convt_prep *p;
+        G3D_TRY(convt_build(c, &p));
+        c->prep = p;
+    } else if (nn_wino_eligible(c)) {
+        c->prep = nn_wino_weights(c);
+        if (!c->prep) return G3D_ERR(G3D_ERR_NOMEM, "conv: cannot allocate the transformed %d->%d kernels", c->cin, c->cout);
+    }
     return G3D_OK;
 }
 
 void g3d_nn_conv_release(g3d_nn_conv *c)
 {
-    if (c->transposed) convt_prep_free(c->prep);
+    if (c->transposed)
+        convt_prep_free(c->prep);
+    else
+        free(c->prep);
     c->prep = NULL;
 }
 
