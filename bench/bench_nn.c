@@ -1,11 +1,11 @@
 /* Layer-library benchmark: each operator on the real shapes of the project's models, its
- * arithmetic rate and that rate as a fraction of the machine's sgemm rate measured in the
- * same run (OpenBLAS, 2048^3, its own threads, the same thread count), re-measured beside every
- * case because the machine is shared: the fraction uses the mean of the sgemm runs just
- * before and just after the case.
+ * arithmetic rate, and that rate as a fraction of the machine's sgemm rate (OpenBLAS, 1536^3,
+ * its own threads, the same thread count) measured in the same run: sgemm and the operator run
+ * in alternation and the fraction is the median over rounds of operator rate / the sgemm rate
+ * just before it, because a shared machine's speed drifts within seconds.
  *   cmake --build build --target bench && ./build/bench_nn [filter] [--reps N]
  * `filter` keeps the cases whose name contains it. Work counts are multiply-adds x 2 of the
- * operator's definition (a Winograd or FFT method would still be counted the direct way). */
+ * operator's definition (also for Winograd, which does fewer). */
 #include "gen3d/nn.h"
 
 #include <cblas.h>
@@ -15,7 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-static int g_reps = 3, g_threads;
+static int g_reps = 5, g_threads;
 static const char *g_filter;
 static float *g_a, *g_b, *g_c;
 
@@ -28,37 +28,51 @@ static float *rnd(size_t n, float scale)
     return p;
 }
 
+/* GFLOP/s of one 1536^3 sgemm (about 35 ms at full speed) */
 static double sgemm_rate(void)
 {
-    const int n = 2048;
-    double best = 1e30;
-    for (int i = 0; i < 2; i++) {
-        double t0 = g3d_time_now();
-        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, n, n, n, 1.0f, g_a, n, g_b, n, 0.0f, g_c, n);
-        double t = g3d_time_now() - t0;
-        best = t < best ? t : best;
-    }
-    return 2.0 * n * n * n / best * 1e-9;
+    const int n = 1536;
+    double t0 = g3d_time_now();
+    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, n, n, n, 1.0f, g_a, n, g_b, n, 0.0f, g_c, n);
+    return 2.0 * n * n * n / (g3d_time_now() - t0) * 1e-9;
 }
 
 typedef void (*case_fn)(void *ctx);
 
-/* Times fn (best of the reps after one warm-up) and prints one row. */
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+/* Times fn against sgemm in alternation: each round runs one sgemm and then fn (repeated to
+ * last at least ~50 ms); the row shows the median time of fn and the median over rounds of
+ * (rate of fn) / (rate of the sgemm just before it), which cancels most of the drift of a
+ * shared machine. */
 static void run(const char *name, const char *shape, double flops, case_fn fn, void *ctx)
 {
     if (g_filter && !strstr(name, g_filter)) return;
-    double base0 = sgemm_rate();
-    fn(ctx);
-    double best = 1e30;
-    for (int i = 0; i < g_reps; i++) {
-        double t0 = g3d_time_now();
-        fn(ctx);
-        double t = g3d_time_now() - t0;
-        best = t < best ? t : best;
+    double t0 = g3d_time_now();
+    fn(ctx); /* warm-up: first-touch of buffers, FFT plans */
+    double once = g3d_time_now() - t0;
+    int inner = once >= 0.05 ? 1 : (int)(0.05 / (once > 1e-6 ? once : 1e-6)) + 1;
+    double t[64], ratio[64];
+    int reps = g_reps < 64 ? g_reps : 64;
+    for (int r = 0; r < reps; r++) {
+        double base = sgemm_rate();
+        t0 = g3d_time_now();
+        for (int i = 0; i < inner; i++) fn(ctx);
+        t[r] = (g3d_time_now() - t0) / inner;
+        ratio[r] = flops / t[r] * 1e-9 / base;
     }
-    double base = 0.5 * (base0 + sgemm_rate()), rate = flops / best * 1e-9;
-    printf("| %-26s | %-34s | %8.2f | %9.2f | %7.1f | %5.0f %% |\n", name, shape, flops * 1e-9, best * 1e3, rate,
-           100.0 * rate / base);
+    qsort(t, reps, sizeof *t, cmp_double);
+    qsort(ratio, reps, sizeof *ratio, cmp_double);
+    double tm = t[reps / 2], rm = ratio[reps / 2];
+    if (flops > 0)
+        printf("| %-26s | %-36s | %8.2f | %9.2f | %7.1f | %5.0f %% |\n", name, shape, flops * 1e-9, tm * 1e3,
+               flops / tm * 1e-9, 100.0 * rm);
+    else
+        printf("| %-26s | %-36s | %8s | %9.2f | %7s | %7s |\n", name, shape, "-", tm * 1e3, "-", "-");
     fflush(stdout);
 }
 
@@ -216,12 +230,12 @@ int main(int argc, char **argv)
     }
     g_threads = omp_get_max_threads();
     openblas_set_num_threads(g_threads);
-    g_a = rnd(2048 * 2048, 1.0f), g_b = rnd(2048 * 2048, 1.0f), g_c = malloc(sizeof(float) * 2048 * 2048);
+    g_a = rnd(1536 * 1536, 1.0f), g_b = rnd(1536 * 1536, 1.0f), g_c = malloc(sizeof(float) * 1536 * 1536);
     const char *ct = getenv("OPENBLAS_CORETYPE");
-    printf("kernels %s, %d threads, OpenBLAS core %s%s%s\n", g3d_nn_isa_name(), g_threads, openblas_get_corename(),
-           ct ? " (OPENBLAS_CORETYPE=" : " (OPENBLAS_CORETYPE unset", ct ? ct : "");
-    printf("| %-26s | %-34s | %8s | %9s | %7s | %7s |\n", "operator", "shape", "GFLOP", "ms", "GFLOP/s", "sgemm");
-    printf("|%s|%s|%s|%s|%s|%s|\n", "----------------------------", "------------------------------------",
+    printf("kernels %s, %d threads, OpenBLAS core %s (OPENBLAS_CORETYPE %s%s)\n", g3d_nn_isa_name(), g_threads,
+           openblas_get_corename(), ct ? "= " : "unset", ct ? ct : "");
+    printf("| %-26s | %-36s | %8s | %9s | %7s | %7s |\n", "operator", "shape", "GFLOP", "ms", "GFLOP/s", "sgemm");
+    printf("|%s|%s|%s|%s|%s|%s|\n", "----------------------------", "--------------------------------------",
            "----------", "-----------", "---------", "---------");
 
     lin("linear dinov2-s qkv", 1370, 384, 1152, G3D_ACT_NONE, 0, G3D_DT_F32, 0);

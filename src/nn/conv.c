@@ -138,6 +138,9 @@ typedef struct phase {
 typedef struct convt_prep {
     int nph;
     phase *ph;
+    /* kernel = stride, no padding: each phase is one tap at offset 0, so all phases are one
+     * product [nph*cout x cin] x x, packing the input once: the phases' kernels stacked */
+    float *stack;
 } convt_prep;
 
 static int floordiv(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
@@ -151,6 +154,7 @@ static void convt_prep_free(convt_prep *p)
         free(p->ph[i].w);
     }
     free(p->ph);
+    free(p->stack);
     free(p);
 }
 
@@ -203,8 +207,18 @@ static g3d_status convt_build(const g3d_nn_conv *c, convt_prep **out)
             free(ky_of);
         }
     free(wf);
+    int single = c->output_padding == 0; /* else the padded border gets no tap, only the bias */
+    for (int i = 0; i < p->nph; i++) single &= p->ph[i].ntaps == 1 && !p->ph[i].dy[0] && !p->ph[i].dx[0];
+    if (single) {
+        const size_t n = (size_t)c->cout * c->cin;
+        p->stack = malloc(sizeof(float) * n * p->nph);
+        if (!p->stack) goto nomem_p;
+        for (int i = 0; i < p->nph; i++) memcpy(p->stack + i * n, p->ph[i].w, sizeof(float) * n);
+    }
     *out = p;
     return G3D_OK;
+nomem_p:
+    wf = NULL;
 nomem:
     free(wf);
     convt_prep_free(p);
@@ -216,6 +230,21 @@ static g3d_status convt_forward(const g3d_nn_conv *c, const convt_prep *p, const
 {
     const int s = one(c->stride);
     const size_t plane = (size_t)ho * wo;
+    if (p->stack) {
+        /* row r of the stacked product is channel r % cout of phase r / cout */
+        long *rowoff = malloc(sizeof(long) * p->nph * c->cout);
+        if (!rowoff) return G3D_ERR(G3D_ERR_NOMEM, "conv_transpose2d: out of memory");
+        for (int i = 0; i < p->nph; i++)
+            for (int co = 0; co < c->cout; co++)
+                rowoff[i * c->cout + co] = (long)co * plane + (long)p->ph[i].ry * wo + p->ph[i].rx;
+        nn_gemm g = {.M = p->nph * c->cout, .N = h * w, .K = c->cin, .a = p->stack, .lda = c->cin, .ka = 1,
+                     .bkind = NN_B_ROWS, .b = x, .ldb = (long)h * w, .y = y, .rowoff = rowoff, .qw = w,
+                     .oys = (long)s * wo, .oxs = s, .alpha = 1.0f, .bias = c->b, .chan_rows = 1, .chan_mod = c->cout,
+                     .epi = epi};
+        g3d_status rc = nn_gemm_run(&g);
+        free(rowoff);
+        return rc;
+    }
     for (int i = 0; i < p->nph; i++) {
         const phase *f = &p->ph[i];
         int qh = f->ry < ho ? (ho - 1 - f->ry) / s + 1 : 0, qw = f->rx < wo ? (wo - 1 - f->rx) / s + 1 : 0;

@@ -168,12 +168,12 @@ static void epilogue(const nn_gemm *g, float *ct, long ldc, int m0, int mt, int 
     g3d_act act = e ? e->act : G3D_ACT_NONE;
     for (int i = 0; i < mt; i++) {
         float *v = ct + (long)i * ldc;
-        int row = m0 + i;
+        const int row = m0 + i, ch = g->chan_mod ? row % g->chan_mod : row;
         if (g->alpha != 1.0f)
             for (int j = 0; j < nt; j++) v[j] *= g->alpha;
         if (g->bias) {
             if (g->chan_rows) {
-                float bb = g->bias[row];
+                float bb = g->bias[ch];
                 for (int j = 0; j < nt; j++) v[j] += bb;
             } else {
                 const float *bb = g->bias + n0;
@@ -183,15 +183,16 @@ static void epilogue(const nn_gemm *g, float *ct, long ldc, int m0, int mt, int 
         if (act != G3D_ACT_NONE) nn_act(act, v, nt);
         if (scale) {
             if (g->chan_rows) {
-                float s = scale[row];
+                float s = scale[ch];
                 for (int j = 0; j < nt; j++) v[j] *= s;
             } else {
                 const float *s = scale + n0;
                 for (int j = 0; j < nt; j++) v[j] *= s[j];
             }
         }
-        float *y = g->y + (long)row * g->ldy;
-        const float *r = res ? res + (long)row * g->ldy : NULL;
+        const long base = g->rowoff ? g->rowoff[row] : (long)row * g->ldy;
+        float *y = g->y + base;
+        const float *r = res ? res + base : NULL;
         if (!g->qw) {
             if (r)
                 for (int j = 0; j < nt; j++) y[n0 + j] = r[n0 + j] + v[j];

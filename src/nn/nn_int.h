@@ -53,14 +53,17 @@ typedef struct nn_gemm {
     long ldb;
     g3d_dtype bt; /* element type of NN_B_PANELS */
     const nn_convsrc *conv;
-    /* output: element (i, j) goes to y[i*ldy + (j/qw)*oys + (j%qw)*oxs + ooff] (qw == 0: j) */
+    /* output: element (i, j) goes to y[row(i) + (j/qw)*oys + (j%qw)*oxs + ooff] (qw == 0: j),
+     * row(i) = rowoff ? rowoff[i] : i*ldy; epi->res is read at the same place */
     float *y;
     long ldy;
+    const long *rowoff;
     int qw;
     long oys, oxs, ooff;
     float alpha;          /* multiplies the product (1 unless set) */
     const float *bias;    /* per output channel */
     int chan_rows;        /* 1: channels are the rows of C (convolution), 0: the columns */
+    int chan_mod;         /* with chan_rows: row i is channel i % chan_mod (0: channel i) */
     const g3d_nn_epi *epi;
 } nn_gemm;
 
