@@ -1,0 +1,300 @@
+/* Layer-library benchmark: each operator on the real shapes of the project's models, its
+ * arithmetic rate, and that rate as a fraction of the machine's sgemm rate (OpenBLAS, 1536^3,
+ * its own threads, the same thread count) measured in the same run: sgemm and the operator run
+ * in alternation and the fraction is the median over rounds of operator rate / the sgemm rate
+ * just before it, because a shared machine's speed drifts within seconds.
+ *   cmake --build build --target bench && ./build/bench_nn [filter] [--reps N]
+ * `filter` keeps the cases whose name contains it. Work counts are multiply-adds x 2 of the
+ * operator's definition (also for Winograd, which does fewer). */
+#include "gen3d/nn.h"
+
+#include <cblas.h>
+#include <math.h>
+#include <omp.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static int g_reps = 5, g_threads;
+static const char *g_filter;
+static float *g_a, *g_b, *g_c;
+
+static float *rnd(size_t n, float scale)
+{
+    float *p = malloc(sizeof(float) * n);
+    g3d_rng r;
+    g3d_rng_seed(&r, n, 7);
+    for (size_t i = 0; i < n; i++) p[i] = scale * (2.0f * g3d_rng_float(&r) - 1.0f);
+    return p;
+}
+
+/* GFLOP/s of one 1536^3 sgemm (about 35 ms at full speed) */
+static double sgemm_rate(void)
+{
+    const int n = 1536;
+    double t0 = g3d_time_now();
+    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, n, n, n, 1.0f, g_a, n, g_b, n, 0.0f, g_c, n);
+    return 2.0 * n * n * n / (g3d_time_now() - t0) * 1e-9;
+}
+
+typedef void (*case_fn)(void *ctx);
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return x < y ? -1 : x > y;
+}
+
+/* Times fn against sgemm in alternation: each round runs one sgemm and then fn (repeated to
+ * last at least ~50 ms); the row shows the median time of fn and the median over rounds of
+ * (rate of fn) / (rate of the sgemm just before it), which cancels most of the drift of a
+ * shared machine. */
+static void run(const char *name, const char *shape, double flops, case_fn fn, void *ctx)
+{
+    if (g_filter && !strstr(name, g_filter)) return;
+    double t0 = g3d_time_now();
+    fn(ctx); /* warm-up: first-touch of buffers, FFT plans */
+    double once = g3d_time_now() - t0;
+    int inner = once >= 0.05 ? 1 : (int)(0.05 / (once > 1e-6 ? once : 1e-6)) + 1;
+    double t[64], ratio[64];
+    int reps = g_reps < 64 ? g_reps : 64;
+    for (int r = 0; r < reps; r++) {
+        double base = sgemm_rate();
+        t0 = g3d_time_now();
+        for (int i = 0; i < inner; i++) fn(ctx);
+        t[r] = (g3d_time_now() - t0) / inner;
+        ratio[r] = flops / t[r] * 1e-9 / base;
+    }
+    qsort(t, reps, sizeof *t, cmp_double);
+    qsort(ratio, reps, sizeof *ratio, cmp_double);
+    double tm = t[reps / 2], rm = ratio[reps / 2];
+    if (flops > 0)
+        printf("| %-26s | %-36s | %8.2f | %9.2f | %7.1f | %5.0f %% |\n", name, shape, flops * 1e-9, tm * 1e3,
+               flops / tm * 1e-9, 100.0 * rm);
+    else
+        printf("| %-26s | %-36s | %8s | %9.2f | %7s | %7s |\n", name, shape, "-", tm * 1e3, "-", "-");
+    fflush(stdout);
+}
+
+static void check(g3d_status rc)
+{
+    if (rc != G3D_OK) {
+        fprintf(stderr, "bench_nn: %s\n", g3d_error_message());
+        exit(1);
+    }
+}
+
+/* ---- linear ------------------------------------------------------------------------------- */
+typedef struct lin_case {
+    g3d_nn_lin L;
+    float *x, *y, *w, *b, *gamma;
+    int n, in, out, legacy;
+    g3d_nn_epi epi;
+} lin_case;
+
+static void lin_fn(void *p)
+{
+    lin_case *c = p;
+    if (c->legacy)
+        g3d_nn_linear(c->x, c->n, c->in, c->w, c->b, c->out, c->y);
+    else
+        check(g3d_nn_lin_forward(&c->L, c->x, c->n, 0, c->y, 0, &c->epi));
+}
+
+static void lin(const char *name, int n, int in, int out, g3d_act act, int residual, g3d_dtype store, int legacy)
+{
+    if (g_filter && !strstr(name, g_filter)) return;
+    lin_case c = {.n = n, .in = in, .out = out, .legacy = legacy};
+    c.x = rnd((size_t)n * in, 1.0f), c.y = rnd((size_t)n * out, 1.0f), c.w = rnd((size_t)in * out, 0.05f);
+    c.b = rnd(out, 0.1f), c.gamma = rnd(out, 1.0f);
+    check(g3d_nn_lin_init(&c.L, c.w, G3D_DT_F32, c.b, out, in, store));
+    c.epi.act = act;
+    if (residual) c.epi.scale = c.gamma, c.epi.res = c.y;
+    char shape[64];
+    snprintf(shape, sizeof shape, "%dx%d -> %d%s%s%s", n, in, out, act ? " +act" : "", residual ? " +ls+res" : "",
+             store == G3D_DT_BF16 ? " bf16" : "");
+    run(name, shape, 2.0 * n * in * out, lin_fn, &c);
+    g3d_nn_lin_free(&c.L);
+    free(c.x), free(c.y), free(c.w), free(c.b), free(c.gamma);
+}
+
+/* ---- attention ---------------------------------------------------------------------------- */
+typedef struct attn_case {
+    g3d_nn_attn a;
+    int windows;
+} attn_case;
+
+static void attn_fn(void *p)
+{
+    attn_case *c = p;
+    for (int i = 0; i < c->windows; i++) check(g3d_nn_attend(&c->a));
+}
+
+static void attn(const char *name, int nq, int nk, int heads, int hd, int windows, int relpos, int grid)
+{
+    if (g_filter && !strstr(name, g_filter)) return;
+    attn_case c = {.windows = windows};
+    const int d = heads * hd;
+    float *q = rnd((size_t)nq * d, 1.0f), *k = rnd((size_t)nk * d, 1.0f), *v = rnd((size_t)nk * d, 1.0f);
+    float *o = malloc(sizeof(float) * (size_t)nq * d), *rh = NULL, *rw = NULL, *relh = NULL;
+    g3d_nn_bias_relpos rp = {0};
+    c.a = (g3d_nn_attn){.nq = nq, .nk = nk, .heads = heads, .hd = hd, .q = q, .k = k, .v = v, .out = o,
+                        .scale = 1.0f / sqrtf((float)hd)};
+    if (relpos) {
+        relh = rnd((size_t)(2 * grid - 1) * hd, 0.1f);
+        rh = malloc(sizeof(float) * (size_t)heads * nq * grid), rw = malloc(sizeof(float) * (size_t)heads * nq * grid);
+        check(g3d_nn_relpos_tables(q, d, heads, hd, grid, grid, grid, grid, relh, relh, rh, rw));
+        rp = (g3d_nn_bias_relpos){rh, rw, nq, grid, grid};
+        c.a.bias = g3d_nn_bias_relpos_fn, c.a.bias_ctx = &rp;
+    }
+    char shape[64];
+    snprintf(shape, sizeof shape, "%d x %d tok, %dx%d%s%s", nq, nk, heads, hd, relpos ? " relpos" : "",
+             windows > 1 ? " x25 win" : "");
+    run(name, shape, 4.0 * nq * nk * d * windows, attn_fn, &c);
+    free(q), free(k), free(v), free(o), free(rh), free(rw), free(relh);
+}
+
+/* ---- convolution -------------------------------------------------------------------------- */
+typedef struct conv_case {
+    g3d_nn_conv c;
+    float *x, *y;
+    int h, w;
+} conv_case;
+
+static void conv_fn(void *p)
+{
+    conv_case *c = p;
+    check(g3d_nn_conv_forward(&c->c, c->x, c->h, c->w, c->y, NULL));
+}
+
+/* prepare: g3d_nn_conv_prepare first (Winograd for 3x3 stride 1, phase kernels for transposed) */
+static void conv(const char *name, int cin, int cout, int k, int stride, int pad, int h, int w, int groups,
+                 g3d_nn_padmode mode, int transposed, int opad, int prepare)
+{
+    if (g_filter && !strstr(name, g_filter)) return;
+    conv_case c = {.h = h, .w = w};
+    size_t nw = (size_t)cin * cout / groups * k * k;
+    float *wt = rnd(nw, 0.05f), *b = rnd(cout, 0.1f);
+    c.c = g3d_nn_conv_make(cin, cout, k, stride, pad, wt, b);
+    c.c.groups = groups, c.c.pad_mode = mode, c.c.transposed = transposed, c.c.output_padding = opad;
+    if (prepare) check(g3d_nn_conv_prepare(&c.c));
+    int ho, wo;
+    check(g3d_nn_conv_out_size(&c.c, h, w, &ho, &wo));
+    c.x = rnd((size_t)cin * h * w, 1.0f), c.y = malloc(sizeof(float) * (size_t)cout * ho * wo);
+    double flops = transposed ? 2.0 * cin * cout * k * k * h * w : 2.0 * cout * (cin / groups) * k * k * ho * wo;
+    char shape[64];
+    snprintf(shape, sizeof shape, "%s%dx%dx%d -> %d k%d s%d%s%s", transposed ? "T " : "", cin, h, w, cout, k, stride,
+             groups > 1 ? " dw" : mode == G3D_PAD_REFLECT ? " reflect" : mode == G3D_PAD_REPLICATE ? " repl" : "",
+             c.c.prep && !transposed ? " wino" : "");
+    run(name, shape, flops, conv_fn, &c);
+    g3d_nn_conv_release(&c.c);
+    free(wt), free(b), free(c.x), free(c.y);
+}
+
+/* ---- memory-bound operators: time only ------------------------------------------------------ */
+typedef struct misc_case {
+    int kind, c, h, w;
+    float *x, *y, *g, *b;
+} misc_case;
+
+static void misc_fn(void *p)
+{
+    misc_case *m = p;
+    switch (m->kind) {
+    case 0: g3d_nn_groupnorm(m->x, m->c, m->h * m->w, 32, m->g, m->b, 1e-6f, G3D_ACT_SILU, m->y); break;
+    case 1: g3d_nn_layernorm(m->x, m->h, m->c, m->g, m->b, 1e-6f, m->y); break;
+    case 2: check(g3d_nn_rfft2(m->x, m->c, m->h, m->w, m->y)); break;
+    case 3: check(g3d_nn_irfft2(m->y, m->c, m->h, m->w, m->x)); break;
+    default: g3d_nn_activate(G3D_ACT_GELU, m->x, (size_t)m->c * m->h * m->w); break;
+    }
+}
+
+static void misc(const char *name, const char *shape, int kind, int c, int h, int w)
+{
+    if (g_filter && !strstr(name, g_filter)) return;
+    misc_case m = {.kind = kind, .c = c, .h = h, .w = w};
+    size_t n = (size_t)c * h * (w + 2) * 2;
+    m.x = rnd(n, 1.0f), m.y = rnd(n, 1.0f), m.g = rnd(c, 1.0f), m.b = rnd(c, 1.0f);
+    run(name, shape, 0, misc_fn, &m);
+    free(m.x), free(m.y), free(m.g), free(m.b);
+}
+
+int main(int argc, char **argv)
+{
+    g3d_process_setup(argv);
+    for (int i = 1; i < argc; i++) {
+        if (!strcmp(argv[i], "--reps") && i + 1 < argc)
+            g_reps = atoi(argv[++i]);
+        else
+            g_filter = argv[i];
+    }
+    g_threads = omp_get_max_threads();
+    openblas_set_num_threads(g_threads);
+    g_a = rnd(1536 * 1536, 1.0f), g_b = rnd(1536 * 1536, 1.0f), g_c = malloc(sizeof(float) * 1536 * 1536);
+    const char *ct = getenv("OPENBLAS_CORETYPE");
+    printf("kernels %s, %d threads, OpenBLAS core %s (OPENBLAS_CORETYPE %s%s)\n", g3d_nn_isa_name(), g_threads,
+           openblas_get_corename(), ct ? "= " : "unset", ct ? ct : "");
+    printf("| %-26s | %-36s | %8s | %9s | %7s | %7s |\n", "operator", "shape", "GFLOP", "ms", "GFLOP/s", "sgemm");
+    printf("|%s|%s|%s|%s|%s|%s|\n", "----------------------------", "--------------------------------------",
+           "----------", "-----------", "---------", "---------");
+
+    lin("linear dinov2-s qkv", 1370, 384, 1152, G3D_ACT_NONE, 0, G3D_DT_F32, 0);
+    lin("linear dinov2-s fc1", 1370, 384, 1536, G3D_ACT_GELU, 0, G3D_DT_F32, 0);
+    lin("linear dinov2-s fc2", 1370, 1536, 384, G3D_ACT_NONE, 1, G3D_DT_F32, 0);
+    lin("linear dinov2-s fc1 legacy", 1370, 384, 1536, G3D_ACT_NONE, 0, G3D_DT_F32, 1);
+    lin("linear dinov2-l qkv", 1370, 1024, 3072, G3D_ACT_NONE, 0, G3D_DT_F32, 0);
+    lin("linear dinov2-l fc1", 1370, 1024, 4096, G3D_ACT_GELU, 0, G3D_DT_F32, 0);
+    lin("linear dinov2-l fc2", 1370, 4096, 1024, G3D_ACT_NONE, 1, G3D_DT_F32, 0);
+    lin("linear sam-b qkv", 4096, 768, 2304, G3D_ACT_NONE, 0, G3D_DT_F32, 0);
+    lin("linear sam-b mlp1", 4096, 768, 3072, G3D_ACT_GELU, 0, G3D_DT_F32, 0);
+    lin("linear sam-b mlp1 bf16", 4096, 768, 3072, G3D_ACT_GELU, 0, G3D_DT_BF16, 0);
+    lin("linear sam-b mlp2", 4096, 3072, 768, G3D_ACT_NONE, 1, G3D_DT_F32, 0);
+    lin("linear sd geglu proj", 4096, 320, 2560, G3D_ACT_NONE, 0, G3D_DT_F32, 0);
+    lin("linear sd ff out", 4096, 1280, 320, G3D_ACT_NONE, 1, G3D_DT_F32, 0);
+    lin("linear sd text k/v", 77, 768, 320, G3D_ACT_NONE, 0, G3D_DT_F32, 0);
+
+    attn("attention dinov2-s", 1370, 1370, 6, 64, 1, 0, 0);
+    attn("attention dinov2-l", 1370, 1370, 16, 64, 1, 0, 0);
+    attn("attention sd1 self", 4096, 4096, 8, 40, 1, 0, 0);
+    attn("attention sd2 self", 4096, 4096, 5, 64, 1, 0, 0);
+    attn("attention sd1 cross", 4096, 77, 8, 40, 1, 0, 0);
+    attn("attention sam-b window", 196, 196, 12, 64, 25, 1, 14);
+    attn("attention sam-b global", 4096, 4096, 12, 64, 1, 1, 64);
+    attn("attention vae mid", 4096, 4096, 1, 512, 1, 0, 0);
+
+    /* 3x3: implicit GEMM (as called without preparing), then prepared (Winograd F(2x2, 3x3)) */
+    for (int prep = 0; prep < 2; prep++) {
+        const char *const names[2][11] = {
+            {"conv3 sd 64x64x320", "conv3 sd 32x32x640", "conv3 sd 16x16x1280", "conv3 vae 256x256x256",
+             "conv3 vae 512x512x128", "conv3 lama l2l 128", "conv3 lama g2l 384->128", "conv3 lama l2g 128->384",
+             "conv3 dpt-s 64 @148", "conv3 moge 128 repl", "conv3 sd down s2"},
+            {"conv3w sd 64x64x320", "conv3w sd 32x32x640", "conv3w sd 16x16x1280", "conv3w vae 256x256x256",
+             "conv3w vae 512x512x128", "conv3w lama l2l 128", "conv3w lama g2l 384->128", "conv3w lama l2g 128->384",
+             "conv3w dpt-s 64 @148", "conv3w moge 128 repl", NULL}};
+        conv(names[prep][0], 320, 320, 3, 1, 1, 64, 64, 1, G3D_PAD_ZEROS, 0, 0, prep);
+        conv(names[prep][1], 640, 640, 3, 1, 1, 32, 32, 1, G3D_PAD_ZEROS, 0, 0, prep);
+        conv(names[prep][2], 1280, 1280, 3, 1, 1, 16, 16, 1, G3D_PAD_ZEROS, 0, 0, prep);
+        conv(names[prep][3], 256, 256, 3, 1, 1, 256, 256, 1, G3D_PAD_ZEROS, 0, 0, prep);
+        conv(names[prep][4], 128, 128, 3, 1, 1, 512, 512, 1, G3D_PAD_ZEROS, 0, 0, prep);
+        conv(names[prep][5], 128, 128, 3, 1, 1, 64, 64, 1, G3D_PAD_REFLECT, 0, 0, prep);
+        conv(names[prep][6], 384, 128, 3, 1, 1, 64, 64, 1, G3D_PAD_REFLECT, 0, 0, prep);
+        conv(names[prep][7], 128, 384, 3, 1, 1, 64, 64, 1, G3D_PAD_REFLECT, 0, 0, prep);
+        conv(names[prep][8], 64, 64, 3, 1, 1, 148, 148, 1, G3D_PAD_ZEROS, 0, 0, prep);
+        conv(names[prep][9], 128, 128, 3, 1, 1, 160, 160, 1, G3D_PAD_REPLICATE, 0, 0, prep);
+        if (names[prep][10]) conv(names[prep][10], 320, 320, 3, 2, 1, 64, 64, 1, G3D_PAD_ZEROS, 0, 0, prep);
+    }
+    conv("conv1 sd proj 320", 320, 320, 1, 1, 0, 64, 64, 1, G3D_PAD_ZEROS, 0, 0, 0);
+    conv("conv1 lama fu 384", 384, 384, 1, 1, 0, 64, 33, 1, G3D_PAD_ZEROS, 0, 0, 0);
+    conv("conv dw3 tinyvit 256", 256, 256, 3, 1, 1, 256, 256, 256, G3D_PAD_ZEROS, 0, 0, 0);
+    conv("convT lama k3s2 512->256", 512, 256, 3, 2, 1, 64, 64, 1, G3D_PAD_ZEROS, 1, 1, 1);
+    conv("convT sam k2s2 256->64", 256, 64, 2, 2, 0, 64, 64, 1, G3D_PAD_ZEROS, 1, 0, 1);
+    conv("convT dpt k4s4 48", 384, 48, 4, 4, 0, 37, 37, 1, G3D_PAD_ZEROS, 1, 0, 1);
+
+    misc("groupnorm+silu vae", "128 x 512x512, 32 groups", 0, 128, 512, 512);
+    misc("layernorm sam-b", "4096 x 768", 1, 768, 4096, 1);
+    misc("gelu sam-b mlp", "4096 x 3072", 4, 3072, 4096, 1);
+    misc("rfft2 lama", "192 x 64x64", 2, 192, 64, 64);
+    misc("irfft2 lama", "192 x 64x64", 3, 192, 64, 64);
+    free(g_a), free(g_b), free(g_c);
+    return 0;
+}

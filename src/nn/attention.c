@@ -1,0 +1,227 @@
+/* Multi-head attention with an online softmax (flash-attention style), never storing the
+ * score matrix.
+ *
+ * A task is one head and one block of 64 queries. It works on transposed tiles: for a block
+ * of keys, S^T [keys x 64 queries] = K_blk (q scale)^T, so the softmax statistics of the 64
+ * queries are vectors across the tile's columns, and O^T [hdv x 64] += V_blk^T P^T. Both
+ * products run on the shared kernel with the keys or the value channels as its broadcast
+ * operand, read straight from the caller's rows; only the query block is packed. Keeping the
+ * queries on the vector side means any head size (40, 80, 160 in SD 1.x) and any key count
+ * (77 text tokens) wastes at most a few rows of six. */
+#include "nn/nn_int.h"
+
+#include <math.h>
+#include <omp.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define QB 64  /* queries per task */
+#define KB 240 /* most keys per block (blocks are balanced: 196 keys are one block) */
+
+static int rup6(int x) { return (x + NN_MR - 1) / NN_MR * NN_MR; }
+
+typedef struct tiles {
+    float *qt, *st, *ot, *edge, *m, *l, *t1;
+} tiles;
+
+static void task(const g3d_nn_attn *a, const tiles *T, int h, int q0)
+{
+    const int hd = a->hd, hdv = a->hdv, nqv = a->nq - q0 < QB ? a->nq - q0 : QB;
+    const int nvq = (nqv + 15) / 16, QW = 16 * nvq;
+    float *qt = T->qt, *st = T->st, *ot = T->ot, *m = T->m, *l = T->l, *corr = T->t1;
+    /* queries of the block, scaled, as columns */
+    for (int d = 0; d < hd; d++)
+        for (int i = 0; i < QW; i++) qt[d * QB + i] = i < nqv ? a->q[(long)(q0 + i) * a->ldq + h * hd + d] * a->scale : 0.0f;
+    for (int i = 0; i < QB; i++) m[i] = -INFINITY, l[i] = 0.0f;
+    memset(ot, 0, sizeof(float) * rup6(hdv) * QB);
+    /* causal: query q0+i sees keys j <= q0 + i + shift */
+    const int shift = a->nk - a->nq;
+    int kend = a->nk;
+    if (a->causal && q0 + nqv - 1 + shift + 1 < kend) kend = q0 + nqv + shift;
+    const int nkb = (kend + KB - 1) / KB, kbs = nkb ? (kend + nkb - 1) / nkb : 0;
+    for (int k0 = 0; k0 < kend; k0 += kbs) {
+        const int kb = kend - k0 < kbs ? kend - k0 : kbs;
+        for (int r = 0; r < kb; r += NN_MR) {
+            const float *ka = a->k + (long)(k0 + r) * a->ldk + h * hd;
+            long lda = a->ldk;
+            if (kb - r < NN_MR) {
+                for (int i = 0; i < NN_MR; i++)
+                    for (int d = 0; d < hd; d++) T->edge[i * hd + d] = i < kb - r ? ka[i * a->ldk + d] : 0.0f;
+                ka = T->edge, lda = hd;
+            }
+            nn_kernel(hd, ka, lda, 1, qt, QB, st + r * QB, QB, nvq, 0);
+        }
+        if (a->bias) a->bias(a->bias_ctx, h, q0, nqv, k0, kb, st, 1, QB);
+        if (a->causal)
+            for (int j = 0; j < kb; j++) {
+                int lim = k0 + j - q0 - shift; /* queries i < lim must not see key k0+j */
+                for (int i = 0; i < QW && i < lim; i++) st[j * QB + i] = -INFINITY;
+            }
+        /* online softmax: new running maximum, rescale what was accumulated */
+        nn_online_softmax(st, QB, kb, QW, m, l, corr);
+        for (int d = 0; d < hdv; d++)
+            for (int i = 0; i < QW; i++) ot[d * QB + i] *= corr[i];
+        /* O^T += V^T P^T, six value channels at a time */
+        for (int d0 = 0; d0 < hdv; d0 += NN_MR) {
+            const float *va = a->v + (long)k0 * a->ldv + h * hdv + d0;
+            long lda = 1, ka = a->ldv;
+            if (hdv - d0 < NN_MR) {
+                for (int i = 0; i < NN_MR; i++)
+                    for (int j = 0; j < kb; j++) T->edge[i * KB + j] = i < hdv - d0 ? va[i + (long)j * a->ldv] : 0.0f;
+                va = T->edge, lda = KB, ka = 1;
+            }
+            nn_kernel(kb, va, lda, ka, st, QB, ot + d0 * QB, QB, nvq, 1);
+        }
+    }
+    for (int i = 0; i < nqv; i++) {
+        float inv = l[i] > 0.0f ? 1.0f / l[i] : 0.0f;
+        float *o = a->out + (long)(q0 + i) * a->ldo + h * hdv;
+        for (int d = 0; d < hdv; d++) o[d] = ot[d * QB + i] * inv;
+    }
+}
+
+/* The descriptor with its defaults filled in, or an error. */
+static g3d_status normalise(const g3d_nn_attn *in, g3d_nn_attn *a)
+{
+    *a = *in;
+    if (!a->hdv) a->hdv = a->hd;
+    if (a->nq < 0 || a->nk < 0 || a->heads <= 0 || a->hd <= 0 || a->hdv <= 0)
+        return G3D_ERR(G3D_ERR_ARG, "attention: bad sizes (%d queries, %d keys, %d heads of %d/%d)", a->nq, a->nk,
+                       a->heads, a->hd, a->hdv);
+    if (!a->ldq) a->ldq = (long)a->heads * a->hd;
+    if (!a->ldk) a->ldk = (long)a->heads * a->hd;
+    if (!a->ldv) a->ldv = (long)a->heads * a->hdv;
+    if (!a->ldo) a->ldo = (long)a->heads * a->hdv;
+    if (a->ldq < (long)a->heads * a->hd || a->ldk < (long)a->heads * a->hd || a->ldv < (long)a->heads * a->hdv ||
+        a->ldo < (long)a->heads * a->hdv)
+        return G3D_ERR(G3D_ERR_ARG, "attention: a row stride is shorter than heads x head size");
+    return G3D_OK;
+}
+
+g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
+{
+    g3d_nn_attn a;
+    G3D_TRY(normalise(desc, &a));
+    if (a.nq == 0) return G3D_OK;
+    const int nqb = (a.nq + QB - 1) / QB, ntask = a.heads * nqb;
+    int nth = omp_in_parallel() ? 1 : omp_get_max_threads();
+    if (nth > ntask) nth = ntask;
+    const int edge = NN_MR * (a.hd > KB ? a.hd : KB);
+    int failed = 0;
+#pragma omp parallel num_threads(nth)
+    {
+        tiles T = {0};
+        size_t nbuf = (size_t)(a.hd + KB + rup6(a.hdv) + 3) * QB + edge;
+        float *buf = aligned_alloc(64, (sizeof(float) * nbuf + 63) / 64 * 64);
+        if (!buf) {
+#pragma omp atomic write
+            failed = 1;
+        } else {
+            T.qt = buf, T.st = T.qt + (size_t)a.hd * QB, T.ot = T.st + (size_t)KB * QB;
+            T.m = T.ot + (size_t)rup6(a.hdv) * QB, T.l = T.m + QB, T.t1 = T.l + QB;
+            T.edge = T.t1 + QB;
+        }
+#pragma omp for schedule(dynamic, 1)
+        for (int t = 0; t < ntask; t++)
+            if (buf) task(&a, &T, t / nqb, (t % nqb) * QB);
+        free(buf);
+    }
+    if (failed) return G3D_ERR(G3D_ERR_NOMEM, "attention: cannot allocate the per-thread tiles");
+    return G3D_OK;
+}
+
+g3d_status g3d_nn_attention(const float *qkv, int n, int heads, int hd, float scale, float *out)
+{
+    const int d = heads * hd;
+    g3d_nn_attn a = {.nq = n, .nk = n, .heads = heads, .hd = hd, .q = qkv, .k = qkv + d, .v = qkv + 2 * d,
+                     .ldq = 3 * d, .ldk = 3 * d, .ldv = 3 * d, .out = out, .scale = scale};
+    return g3d_nn_attend(&a);
+}
+
+/* ---- biases ------------------------------------------------------------------------------- */
+void g3d_nn_bias_dense_fn(void *ctx, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks)
+{
+    const g3d_nn_bias_dense *d = ctx;
+    for (int i = 0; i < nq; i++) {
+        const float *b = d->b + head * d->head_stride + (long)(q0 + i) * d->ld + k0;
+        for (int j = 0; j < nk; j++) s[i * qs + j * ks] += b[j];
+    }
+}
+
+void g3d_nn_bias_relpos_fn(void *ctx, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks)
+{
+    const g3d_nn_bias_relpos *r = ctx;
+    /* tables are key-major, so the queries of one key are contiguous like the tile's columns */
+    const float *rh = r->rh + (long)head * r->kh * r->nq + q0, *rw = r->rw + (long)head * r->kw * r->nq + q0;
+    for (int j = 0; j < nk; j++) {
+        const float *h = rh + (long)((k0 + j) / r->kw) * r->nq, *w = rw + (long)((k0 + j) % r->kw) * r->nq;
+        float *sj = s + j * ks;
+        if (qs == 1)
+            for (int i = 0; i < nq; i++) sj[i] += h[i] + w[i];
+        else
+            for (int i = 0; i < nq; i++) sj[i * qs] += h[i] + w[i];
+    }
+}
+
+g3d_status g3d_nn_relpos_tables(const float *q, long ldq, int heads, int hd, int qh, int qw, int kh, int kw,
+                                const float *rel_h, const float *rel_w, float *rh, float *rw)
+{
+    if (qh != kh || qw != kw)
+        return G3D_ERR(G3D_ERR_UNSUPPORTED, "relative positions: query grid %dx%d differs from key grid %dx%d", qw, qh,
+                       kw, kh);
+    const int nq = qh * qw;
+#pragma omp parallel for schedule(static)
+    for (long t = 0; t < (long)heads * nq; t++) {
+        int h = (int)(t / nq), i = (int)(t % nq), qy = i / qw, qx = i % qw;
+        const float *qi = q + (long)i * ldq + h * hd;
+        for (int ky = 0; ky < kh; ky++) {
+            const float *r = rel_h + (long)(qy - ky + kh - 1) * hd;
+            float s = 0;
+            for (int c = 0; c < hd; c++) s += qi[c] * r[c];
+            rh[((long)h * kh + ky) * nq + i] = s;
+        }
+        for (int kx = 0; kx < kw; kx++) {
+            const float *r = rel_w + (long)(qx - kx + kw - 1) * hd;
+            float s = 0;
+            for (int c = 0; c < hd; c++) s += qi[c] * r[c];
+            rw[((long)h * kw + kx) * nq + i] = s;
+        }
+    }
+    return G3D_OK;
+}
+
+/* ---- reference -------------------------------------------------------------------------------- */
+void nn_ref_attend(const g3d_nn_attn *desc)
+{
+    g3d_nn_attn a;
+    if (normalise(desc, &a) != G3D_OK) return;
+    float *s = malloc(sizeof(float) * (size_t)(a.nk ? a.nk : 1));
+    double *p = malloc(sizeof(double) * (size_t)(a.nk ? a.nk : 1));
+    if (!s || !p) {
+        free(s), free(p);
+        return;
+    }
+    for (int h = 0; h < a.heads; h++)
+        for (int i = 0; i < a.nq; i++) {
+            const float *qi = a.q + (long)i * a.ldq + h * a.hd;
+            for (int j = 0; j < a.nk; j++) {
+                double d = 0;
+                for (int c = 0; c < a.hd; c++) d += (double)qi[c] * a.k[(long)j * a.ldk + h * a.hd + c];
+                s[j] = (float)(d * a.scale);
+            }
+            if (a.bias) a.bias(a.bias_ctx, h, i, 1, 0, a.nk, s, 0, 1);
+            double mx = -INFINITY, sum = 0;
+            for (int j = 0; j < a.nk; j++) {
+                if (a.causal && j > i + a.nk - a.nq) s[j] = -INFINITY;
+                mx = s[j] > mx ? s[j] : mx;
+            }
+            for (int j = 0; j < a.nk; j++) sum += p[j] = mx == -INFINITY ? 0.0 : exp(s[j] - mx);
+            float *o = a.out + (long)i * a.ldo + h * a.hdv;
+            for (int c = 0; c < a.hdv; c++) {
+                double acc = 0;
+                for (int j = 0; j < a.nk; j++) acc += p[j] * a.v[(long)j * a.ldv + h * a.hdv + c];
+                o[c] = sum > 0 ? (float)(acc / sum) : 0.0f;
+            }
+        }
+    free(s), free(p);
+}

@@ -1,0 +1,339 @@
+/* The product driver: C = A B cut into tiles of C whose size depends only on the shape, each
+ * tile computed by one thread over the whole of K (in blocks that fit the caches), then passed
+ * through the epilogue (bias, activation, LayerScale, residual) while still in cache.
+ *
+ * Inside a tile: a block of B (KC rows x NT columns) is packed into 64-column panels (or used
+ * in place when it was packed at load time), then for each group of 6 rows of A the kernel
+ * sweeps the panels. A is never packed: the kernel broadcasts its elements straight from the
+ * caller's rows (16-bit weights are widened per tile first). */
+#include "nn/nn_int.h"
+
+#include <immintrin.h>
+#include <omp.h>
+#include <stdlib.h>
+#include <string.h>
+
+static long rup(long x, long m) { return (x + m - 1) / m * m; }
+static long cdiv(long x, long m) { return (x + m - 1) / m; }
+
+/* ---- 16-bit widening ------------------------------------------------------------------- */
+__attribute__((target("avx2,f16c"))) static long widen_f16c(const uint16_t *src, float *dst, long n)
+{
+    long i = 0;
+    for (; i + 8 <= n; i += 8) _mm256_storeu_ps(dst + i, _mm256_cvtph_ps(_mm_loadu_si128((const __m128i *)(src + i))));
+    return i;
+}
+
+void nn_widen(g3d_dtype t, const uint16_t *src, float *dst, long n)
+{
+    if (t == G3D_DT_BF16) {
+        uint32_t *d = (uint32_t *)dst;
+        for (long i = 0; i < n; i++) d[i] = (uint32_t)src[i] << 16;
+        return;
+    }
+    long i = 0;
+    if (nn_isa() >= NN_ISA_AVX2 && __builtin_cpu_supports("f16c")) i = widen_f16c(src, dst, n);
+    g3d_dtype_to_f32(G3D_DT_F16, src + i, dst + i, n - i);
+}
+
+/* ---- packing B --------------------------------------------------------------------------- */
+/* Panel q of a packed block holds rows 0..kc-1 of columns 64q..64q+63 at bp + q*kc*64; the
+ * columns past nt up to the next multiple of 16 are zero so the kernel can read them. */
+static void zero_tail(float *bp, int kc, int nt)
+{
+    int used = nt & 63;
+    if (!used) return;
+    int pad = (int)rup(used, 16) - used;
+    if (!pad) return;
+    float *d = bp + (long)(nt >> 6) * kc * 64 + used;
+    for (int k = 0; k < kc; k++) memset(d + (long)k * 64, 0, sizeof(float) * pad);
+}
+
+static void pack_rows(const float *b, long ldb, int k0, int kc, int n0, int nt, float *bp)
+{
+    for (int k = 0; k < kc; k++) {
+        const float *src = b + (long)(k0 + k) * ldb + n0;
+        for (int q = 0; q * 64 < nt; q++) {
+            int cols = nt - 64 * q < 64 ? nt - 64 * q : 64;
+            memcpy(bp + ((long)q * kc + k) * 64, src + 64 * q, sizeof(float) * cols);
+        }
+    }
+    zero_tail(bp, kc, nt);
+}
+
+static void pack_cols(const float *b, long ldb, int k0, int kc, int n0, int nt, float *bp)
+{
+    for (int j = 0; j < nt; j++) {
+        const float *src = b + (long)(n0 + j) * ldb + k0;
+        float *d = bp + (long)(j >> 6) * kc * 64 + (j & 63);
+        for (int k = 0; k < kc; k++) d[(long)k * 64] = src[k];
+    }
+    zero_tail(bp, kc, nt);
+}
+
+/* A run of output pixels on one row of the output grid inside one panel. */
+typedef struct piece {
+    int qy, qx, len, t;
+} piece;
+
+static int conv_pieces(const nn_convsrc *s, int n0, int nt, piece *p)
+{
+    int np = 0;
+    for (int t = 0; t < nt;) {
+        int j = n0 + t, qy = j / s->qw, qx = j % s->qw;
+        int len = s->qw - qx;
+        if (len > nt - t) len = nt - t;
+        if (len > 64 - (t & 63)) len = 64 - (t & 63);
+        p[np++] = (piece){qy, qx, len, t};
+        t += len;
+    }
+    return np;
+}
+
+/* Index of a padded coordinate inside [0, n) (reflect needs pad < n, checked by callers). */
+static int pad_index(g3d_nn_padmode m, int i, int n)
+{
+    if (m == G3D_PAD_REFLECT) return i < 0 ? -i : i >= n ? 2 * (n - 1) - i : i;
+    return i < 0 ? 0 : i >= n ? n - 1 : i;
+}
+
+static void pack_conv(const nn_convsrc *s, int k0, int kc, const piece *p, int np, int nt, float *bp)
+{
+    const int h = s->h, w = s->w, st = s->stride;
+    const int zeros = s->pad == G3D_PAD_ZEROS;
+    for (int k = 0; k < kc; k++) {
+        int kk = k0 + k, c = kk / s->ntaps, tp = kk % s->ntaps, dy = s->dy[tp], dx = s->dx[tp];
+        const float *plane = s->x + (size_t)c * h * w;
+        for (int e = 0; e < np; e++) {
+            float *d = bp + (long)(p[e].t >> 6) * kc * 64 + (long)k * 64 + (p[e].t & 63);
+            int len = p[e].len, iy = p[e].qy * st + dy;
+            if (iy < 0 || iy >= h) {
+                if (zeros) {
+                    memset(d, 0, sizeof(float) * len);
+                    continue;
+                }
+                iy = pad_index(s->pad, iy, h);
+            }
+            const float *row = plane + (size_t)iy * w;
+            int ix0 = p[e].qx * st + dx;
+            /* u in [lo, hi) reads inside the row */
+            int lo = ix0 >= 0 ? 0 : (-ix0 + st - 1) / st;
+            int hi = ix0 > w - 1 ? 0 : (w - 1 - ix0) / st + 1;
+            if (hi > len) hi = len;
+            if (lo > len) lo = len;
+            if (hi < lo) hi = lo;
+            for (int u = 0; u < lo; u++) d[u] = zeros ? 0.0f : row[pad_index(s->pad, ix0 + u * st, w)];
+            if (st == 1)
+                memcpy(d + lo, row + ix0 + lo, sizeof(float) * (hi - lo));
+            else
+                for (int u = lo; u < hi; u++) d[u] = row[ix0 + u * st];
+            for (int u = hi; u < len; u++) d[u] = zeros ? 0.0f : row[pad_index(s->pad, ix0 + u * st, w)];
+        }
+    }
+    zero_tail(bp, kc, nt);
+}
+
+/* ---- tiling ---------------------------------------------------------------------------- */
+typedef struct tiling {
+    int KC, MT, NT;
+} tiling;
+
+/* A pure function of the shape (never of the thread count). Tiles: at most ~216 rows (B is
+ * packed once per tile, so tall tiles amortise it) by 256 columns, K in blocks of <= 320 so a
+ * packed block of B stays in L2; shrunk until there are at least 8 tiles to share out. */
+static tiling choose_tiling(const nn_gemm *g)
+{
+    tiling t;
+    int nb = g->K <= 384 ? 1 : (int)cdiv(g->K, 320);
+    t.KC = (int)cdiv(g->K, nb);
+    int cap = g->bkind == NN_B_PANELS ? 96 : 216;
+    t.MT = (int)rup(cdiv(g->M, cdiv(g->M, cap)), NN_MR);
+    t.NT = g->N > 128 ? 256 : g->N > 64 ? 128 : 64; /* halved below: stays a multiple of 64 */
+    while (cdiv(g->M, t.MT) * cdiv(g->N, t.NT) < 8) {
+        if (t.NT > 64)
+            t.NT /= 2;
+        else if (t.MT > 4 * NN_MR)
+            t.MT = (int)rup(t.MT / 2, NN_MR);
+        else
+            break;
+    }
+    return t;
+}
+
+/* ---- epilogue -------------------------------------------------------------------------- */
+static void epilogue(const nn_gemm *g, float *ct, long ldc, int m0, int mt, int n0, int nt)
+{
+    const g3d_nn_epi *e = g->epi;
+    const float *scale = e ? e->scale : NULL, *res = e ? e->res : NULL;
+    g3d_act act = e ? e->act : G3D_ACT_NONE;
+    for (int i = 0; i < mt; i++) {
+        float *v = ct + (long)i * ldc;
+        const int row = m0 + i, ch = g->chan_mod ? row % g->chan_mod : row;
+        if (g->alpha != 1.0f)
+            for (int j = 0; j < nt; j++) v[j] *= g->alpha;
+        if (g->bias) {
+            if (g->chan_rows) {
+                float bb = g->bias[ch];
+                for (int j = 0; j < nt; j++) v[j] += bb;
+            } else {
+                const float *bb = g->bias + n0;
+                for (int j = 0; j < nt; j++) v[j] += bb[j];
+            }
+        }
+        if (act != G3D_ACT_NONE) nn_act(act, v, nt);
+        if (scale) {
+            if (g->chan_rows) {
+                float s = scale[ch];
+                for (int j = 0; j < nt; j++) v[j] *= s;
+            } else {
+                const float *s = scale + n0;
+                for (int j = 0; j < nt; j++) v[j] *= s[j];
+            }
+        }
+        const long base = g->rowoff ? g->rowoff[row] : (long)row * g->ldy;
+        float *y = g->y + base;
+        const float *r = res ? res + base : NULL;
+        if (!g->qw) {
+            if (r)
+                for (int j = 0; j < nt; j++) y[n0 + j] = r[n0 + j] + v[j];
+            else
+                memcpy(y + n0, v, sizeof(float) * nt);
+        } else {
+            int qy = n0 / g->qw, qx = n0 % g->qw;
+            for (int j = 0; j < nt; j++) {
+                long off = qy * g->oys + qx * g->oxs + g->ooff;
+                y[off] = r ? r[off] + v[j] : v[j];
+                if (++qx == g->qw) qx = 0, qy++;
+            }
+        }
+    }
+}
+
+/* ---- the tile loop --------------------------------------------------------------------- */
+typedef struct scratch {
+    float *bp, *ct, *aw, *ae;
+    piece *pieces;
+} scratch;
+
+static void run_tile(const nn_gemm *g, const tiling *t, const scratch *s, int m0, int n0)
+{
+    const int mt = g->M - m0 < t->MT ? g->M - m0 : t->MT, nt = g->N - n0 < t->NT ? g->N - n0 : t->NT;
+    const long ldc = rup(t->NT, 64);
+    const int npan = (int)cdiv(nt, 64);
+    int np = g->bkind == NN_B_CONV ? conv_pieces(g->conv, n0, nt, s->pieces) : 0;
+    for (int k0 = 0; k0 < g->K; k0 += t->KC) {
+        const int kc = g->K - k0 < t->KC ? g->K - k0 : t->KC;
+        /* B block */
+        const float *bp = s->bp;
+        long pstride = (long)kc * 64; /* floats between panels */
+        switch (g->bkind) {
+        case NN_B_ROWS: pack_rows(g->b, g->ldb, k0, kc, n0, nt, s->bp); break;
+        case NN_B_COLS: pack_cols(g->b, g->ldb, k0, kc, n0, nt, s->bp); break;
+        case NN_B_CONV: pack_conv(g->conv, k0, kc, s->pieces, np, nt, s->bp); break;
+        default:
+            if (g->bt == G3D_DT_F32) {
+                bp = (const float *)g->b + ((long)(n0 / 64) * g->K + k0) * 64;
+                pstride = (long)g->K * 64;
+            } else {
+                for (int q = 0; q < npan; q++)
+                    nn_widen(g->bt, (const uint16_t *)g->b + ((long)(n0 / 64 + q) * g->K + k0) * 64,
+                             s->bp + (long)q * kc * 64, (long)kc * 64);
+            }
+            break;
+        }
+        /* A block */
+        const float *a;
+        long lda, ka;
+        if (g->a16) {
+            for (int i = 0; i < mt; i++) nn_widen(g->a16t, g->a16 + (long)(m0 + i) * g->lda + k0, s->aw + (long)i * kc, kc);
+            a = s->aw, lda = kc, ka = 1;
+        } else {
+            a = g->a + (long)m0 * g->lda + (long)k0 * g->ka, lda = g->lda, ka = g->ka;
+        }
+        for (int ir = 0; ir < mt; ir += NN_MR) {
+            const float *ap = a + (long)ir * lda;
+            long la = lda, lk = ka;
+            int rows = mt - ir;
+            if (rows < NN_MR) {
+                /* the last rows: copied so the kernel can read six */
+                for (int i = 0; i < NN_MR; i++)
+                    for (int k = 0; k < kc; k++) s->ae[(long)i * kc + k] = i < rows ? ap[i * lda + k * ka] : 0.0f;
+                ap = s->ae, la = kc, lk = 1;
+            }
+            for (int q = 0; q < npan; q++) {
+                int cols = nt - 64 * q < 64 ? nt - 64 * q : 64;
+                nn_kernel(kc, ap, la, lk, bp + q * pstride, 64, s->ct + (long)ir * ldc + 64 * q, ldc, (cols + 15) / 16,
+                          k0 > 0);
+            }
+        }
+    }
+    epilogue(g, s->ct, ldc, m0, mt, n0, nt);
+}
+
+g3d_status nn_gemm_run(const nn_gemm *g)
+{
+    if (g->M <= 0 || g->N <= 0) return G3D_OK;
+    if (g->K <= 0) return G3D_ERR(G3D_ERR_ARG, "matrix product with an empty inner dimension");
+    const tiling t = choose_tiling(g);
+    const int tm = (int)cdiv(g->M, t.MT), tn = (int)cdiv(g->N, t.NT), ntiles = tm * tn;
+    int nth = omp_in_parallel() ? 1 : omp_get_max_threads();
+    if (nth > ntiles) nth = ntiles;
+    int failed = 0;
+    const long ldc = rup(t.NT, 64);
+#pragma omp parallel num_threads(nth)
+    {
+        scratch s = {0};
+        s.ct = aligned_alloc(64, sizeof(float) * (size_t)rup(t.MT * ldc, 16));
+        s.bp = aligned_alloc(64, sizeof(float) * (size_t)rup((long)t.KC * ldc, 16));
+        s.ae = malloc(sizeof(float) * (size_t)NN_MR * t.KC);
+        s.aw = g->a16 ? malloc(sizeof(float) * (size_t)t.MT * t.KC) : NULL;
+        s.pieces = g->bkind == NN_B_CONV ? malloc(sizeof(piece) * (size_t)(t.NT + 8)) : NULL;
+        int ok = s.ct && s.bp && s.ae && (!g->a16 || s.aw) && (g->bkind != NN_B_CONV || s.pieces);
+        if (!ok) {
+#pragma omp atomic write
+            failed = 1;
+        }
+#pragma omp for schedule(dynamic, 1)
+        for (int i = 0; i < ntiles; i++)
+            if (ok) run_tile(g, &t, &s, (i / tn) * t.MT, (i % tn) * t.NT);
+        free(s.ct);
+        free(s.bp);
+        free(s.ae);
+        free(s.aw);
+        free(s.pieces);
+    }
+    if (failed) return G3D_ERR(G3D_ERR_NOMEM, "matrix product %dx%dx%d: cannot allocate tile scratch", g->M, g->N, g->K);
+    return G3D_OK;
+}
+
+/* ---- public matmul --------------------------------------------------------------------- */
+g3d_status g3d_nn_matmul(int ta, int tb, int M, int N, int K, float alpha, const float *A, int lda, const float *B,
+                         int ldb, float beta, float *C, int ldc)
+{
+    if (M < 0 || N < 0 || K < 0) return G3D_ERR(G3D_ERR_ARG, "matmul: negative size %dx%dx%d", M, N, K);
+    if (beta != 0.0f && beta != 1.0f) return G3D_ERR(G3D_ERR_ARG, "matmul: beta must be 0 or 1, got %g", beta);
+    if (M == 0 || N == 0) return G3D_OK;
+    if (K == 0) {
+        if (beta == 0.0f)
+            for (int i = 0; i < M; i++) memset(C + (long)i * ldc, 0, sizeof(float) * N);
+        return G3D_OK;
+    }
+    g3d_nn_epi epi = {.res = beta == 1.0f ? C : NULL};
+    nn_gemm g = {.M = M, .N = N, .K = K, .a = A, .lda = ta ? 1 : lda, .ka = ta ? lda : 1,
+                 .bkind = tb ? NN_B_COLS : NN_B_ROWS, .b = B, .ldb = ldb, .y = C, .ldy = ldc, .alpha = alpha,
+                 .epi = &epi};
+    return nn_gemm_run(&g);
+}
+
+void nn_ref_matmul(int ta, int tb, int M, int N, int K, float alpha, const float *A, int lda, const float *B, int ldb,
+                   float beta, float *C, int ldc)
+{
+    for (int i = 0; i < M; i++)
+        for (int j = 0; j < N; j++) {
+            double s = 0;
+            for (int k = 0; k < K; k++)
+                s += (double)(ta ? A[(long)k * lda + i] : A[(long)i * lda + k]) *
+                     (tb ? B[(long)j * ldb + k] : B[(long)k * ldb + j]);
+            C[(long)i * ldc + j] = (float)(alpha * s + (beta != 0.0f ? beta * C[(long)i * ldc + j] : 0.0));
+        }
+}

@@ -1,0 +1,113 @@
+/* The register-blocked multiply at the heart of every product in src/nn, one copy per
+ * instruction set, chosen once at run time (the library is built for the baseline x86-64 so a
+ * user's binary runs anywhere; the AVX-512 and AVX2 copies carry GCC target attributes).
+ *
+ * Shape: C[6 x 16*nv] (+)= A[6 x K] B[K x 16*nv]. A is read by broadcasting single elements
+ * (row i, step k at a[i*lda + k*ka]) so activations, weights and transposed operands need no
+ * packing; B rows are vectors (b + k*ldb). Each element of C is one chain of fused
+ * multiply-adds over k in order, whatever the tiling around it, which is what makes every
+ * product independent of the thread count. This file is compiled with -ffp-contract=fast so
+ * the vector a*b + c below becomes one FMA instruction. */
+#include "nn/nn_int.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+typedef float v16 __attribute__((vector_size(64)));
+typedef float v16u __attribute__((vector_size(64), aligned(4), may_alias));
+typedef float v8 __attribute__((vector_size(32)));
+typedef float v8u __attribute__((vector_size(32), aligned(4), may_alias));
+
+/* 6 rows x NCH vectors of type VT; the arrays are fully unrolled into registers. */
+#define KERNEL_BODY(VT, VTU, NCH)                                                                  \
+    VT r[NN_MR][NCH];                                                                              \
+    _Pragma("GCC unroll 6") for (int i = 0; i < NN_MR; i++)                                        \
+        _Pragma("GCC unroll 4") for (int j = 0; j < NCH; j++)                                      \
+            r[i][j] = acc ? (VT) * (const VTU *)(c + i * ldc + j * (int)(sizeof(VT) / 4)) : (VT){0}; \
+    const float *a0 = a, *a1 = a + lda, *a2 = a + 2 * lda, *a3 = a + 3 * lda, *a4 = a + 4 * lda,    \
+                *a5 = a + 5 * lda;                                                                 \
+    for (int k = 0; k < K; k++) {                                                                  \
+        VT bv[NCH];                                                                                \
+        _Pragma("GCC unroll 4") for (int j = 0; j < NCH; j++) bv[j] =                              \
+            *(const VTU *)(b + j * (int)(sizeof(VT) / 4));                                         \
+        b += ldb;                                                                                  \
+        const float x[NN_MR] = {*a0, *a1, *a2, *a3, *a4, *a5};                                     \
+        a0 += ka, a1 += ka, a2 += ka, a3 += ka, a4 += ka, a5 += ka;                                \
+        _Pragma("GCC unroll 6") for (int i = 0; i < NN_MR; i++)                                    \
+            _Pragma("GCC unroll 4") for (int j = 0; j < NCH; j++) r[i][j] += x[i] * bv[j];         \
+    }                                                                                              \
+    _Pragma("GCC unroll 6") for (int i = 0; i < NN_MR; i++)                                        \
+        _Pragma("GCC unroll 4") for (int j = 0; j < NCH; j++)                                      \
+            *(VTU *)(c + i * ldc + j * (int)(sizeof(VT) / 4)) = r[i][j];
+
+#define KARGS int K, const float *restrict a, long lda, long ka, const float *restrict b, long ldb, \
+              float *restrict c, long ldc, int acc
+
+#define AVX512 __attribute__((target("avx512f,avx512vl,avx512bw,fma,f16c")))
+#define AVX2 __attribute__((target("avx2,fma,f16c")))
+
+AVX512 static void k512_1(KARGS) { KERNEL_BODY(v16, v16u, 1) }
+AVX512 static void k512_2(KARGS) { KERNEL_BODY(v16, v16u, 2) }
+AVX512 static void k512_3(KARGS) { KERNEL_BODY(v16, v16u, 3) }
+AVX512 static void k512_4(KARGS) { KERNEL_BODY(v16, v16u, 4) }
+/* 16 ymm registers: 6 rows x 16 columns is the widest tile that stays in them */
+AVX2 static void k256(KARGS) { KERNEL_BODY(v8, v8u, 2) }
+static void kbase(KARGS) { KERNEL_BODY(v8, v8u, 2) }
+
+static int g_isa = -1;
+
+static int detect(void)
+{
+    __builtin_cpu_init();
+    if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512bw") &&
+        __builtin_cpu_supports("fma"))
+        return NN_ISA_AVX512;
+    if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) return NN_ISA_AVX2;
+    return NN_ISA_BASE;
+}
+
+int nn_isa(void)
+{
+    int isa = __atomic_load_n(&g_isa, __ATOMIC_RELAXED);
+    if (isa < 0) {
+        isa = detect();
+        const char *e = getenv("G3D_NN_ISA");
+        /* a lower level may be forced (to compare paths); never a higher one */
+        if (e && !strcmp(e, "avx2") && isa > NN_ISA_AVX2) isa = NN_ISA_AVX2;
+        if (e && !strcmp(e, "base")) isa = NN_ISA_BASE;
+        __atomic_store_n(&g_isa, isa, __ATOMIC_RELAXED);
+    }
+    return isa;
+}
+
+int nn_isa_force(int isa)
+{
+    int best = detect(), old = nn_isa();
+    __atomic_store_n(&g_isa, isa < best ? isa : best, __ATOMIC_RELAXED);
+    return old;
+}
+
+const char *g3d_nn_isa_name(void)
+{
+    static const char *const names[] = {"generic x86-64", "AVX2", "AVX-512"};
+    return names[nn_isa()];
+}
+
+void nn_kernel(int K, const float *a, long lda, long ka, const float *b, long ldb, float *c, long ldc, int nv, int acc)
+{
+    switch (nn_isa()) {
+    case NN_ISA_AVX512:
+        switch (nv) {
+        case 1: k512_1(K, a, lda, ka, b, ldb, c, ldc, acc); return;
+        case 2: k512_2(K, a, lda, ka, b, ldb, c, ldc, acc); return;
+        case 3: k512_3(K, a, lda, ka, b, ldb, c, ldc, acc); return;
+        default: k512_4(K, a, lda, ka, b, ldb, c, ldc, acc); return;
+        }
+    case NN_ISA_AVX2:
+        for (int j = 0; j < nv; j++) k256(K, a, lda, ka, b + 16 * j, ldb, c + 16 * j, ldc, acc);
+        return;
+    default:
+        for (int j = 0; j < nv; j++) kbase(K, a, lda, ka, b + 16 * j, ldb, c + 16 * j, ldc, acc);
+        return;
+    }
+}
