@@ -316,7 +316,8 @@ TEST(hostile_jpeg)
     CHECK(img.data == NULL && strstr(g3d_error_message(), "bad.jpg"));
     write_bytes(p, good, 200); /* truncated in the headers */
     CHECK_FAILS(g3d_image_load(p, 3, &img));
-    write_bytes(p, "\xff\xd8\xff\xe0 not a JPEG at all", 27);
+    static const char not_jpeg[] = "\xff\xd8\xff\xe0 not a JPEG at all";
+    write_bytes(p, not_jpeg, sizeof not_jpeg - 1);
     CHECK_FAILS(g3d_image_load(p, 3, &img));
     /* a frame header claiming a 40000-pixel width */
     for (size_t i = 0; i + 9 < n; i++)
