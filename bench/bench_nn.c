@@ -121,30 +121,35 @@ static void lin(const char *name, int n, int in, int out, g3d_act act, int resid
 /* ---- attention ---------------------------------------------------------------------------- */
 typedef struct attn_case {
     g3d_nn_attn a;
-    int windows;
 } attn_case;
 
 static void attn_fn(void *p)
 {
     attn_case *c = p;
-    for (int i = 0; i < c->windows; i++) check(g3d_nn_attend(&c->a));
+    check(g3d_nn_attend(&c->a));
 }
 
 static void attn(const char *name, int nq, int nk, int heads, int hd, int windows, int relpos, int grid)
 {
     if (g_filter && !strstr(name, g_filter)) return;
-    attn_case c = {.windows = windows};
+    attn_case c;
     const int d = heads * hd;
-    float *q = rnd((size_t)nq * d, 1.0f), *k = rnd((size_t)nk * d, 1.0f), *v = rnd((size_t)nk * d, 1.0f);
-    float *o = malloc(sizeof(float) * (size_t)nq * d), *rh = NULL, *rw = NULL, *relh = NULL;
+    const size_t nqw = (size_t)nq * windows, nkw = (size_t)nk * windows;
+    float *q = rnd(nqw * d, 1.0f), *k = rnd(nkw * d, 1.0f), *v = rnd(nkw * d, 1.0f);
+    float *o = malloc(sizeof(float) * nqw * d), *rh = NULL, *rw = NULL, *relh = NULL;
     g3d_nn_bias_relpos rp = {0};
+    /* windows: one batched call, problem b at row b*nq */
     c.a = (g3d_nn_attn){.nq = nq, .nk = nk, .heads = heads, .hd = hd, .q = q, .k = k, .v = v, .out = o,
-                        .scale = 1.0f / sqrtf((float)hd)};
+                        .scale = 1.0f / sqrtf((float)hd), .batch = windows, .bsq = (long)nq * d,
+                        .bsk = (long)nk * d, .bsv = (long)nk * d, .bso = (long)nq * d};
     if (relpos) {
         relh = rnd((size_t)(2 * grid - 1) * hd, 0.1f);
-        rh = malloc(sizeof(float) * (size_t)heads * nq * grid), rw = malloc(sizeof(float) * (size_t)heads * nq * grid);
-        check(g3d_nn_relpos_tables(q, d, heads, hd, grid, grid, grid, grid, relh, relh, rh, rw));
-        rp = (g3d_nn_bias_relpos){rh, rw, nq, grid, grid};
+        size_t nt = (size_t)windows * heads * nq * grid;
+        rh = malloc(sizeof(float) * nt), rw = malloc(sizeof(float) * nt);
+        for (int b = 0; b < windows; b++)
+            check(g3d_nn_relpos_tables(q + (size_t)b * nq * d, d, heads, hd, grid, grid, grid, grid, relh, relh,
+                                       rh + (size_t)b * heads * nq * grid, rw + (size_t)b * heads * nq * grid));
+        rp = (g3d_nn_bias_relpos){rh, rw, nq, grid, grid, heads};
         c.a.bias = g3d_nn_bias_relpos_fn, c.a.bias_ctx = &rp;
     }
     char shape[64];

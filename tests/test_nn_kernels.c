@@ -233,12 +233,13 @@ TEST(conv_bad_configurations)
 
 static void check_attention(g3d_nn_attn a, uint64_t seed, const char *what)
 {
-    const int hdv = a.hdv ? a.hdv : a.hd;
+    const int hdv = a.hdv ? a.hdv : a.hd, nb = a.batch ? a.batch : 1, nq = a.nq ? a.nq : 1, nk = a.nk ? a.nk : 1;
     const long ldq = a.heads * a.hd + 3, ldk = a.heads * a.hd + 5, ldv = a.heads * hdv + 1, ldo = a.heads * hdv + 2;
-    float *q = rnd((size_t)ldq * a.nq, seed, 1), *k = rnd((size_t)ldk * (a.nk ? a.nk : 1), seed + 1, 1),
-          *v = rnd((size_t)ldv * (a.nk ? a.nk : 1), seed + 2, 1);
-    float *o = malloc(sizeof(float) * ldo * (a.nq ? a.nq : 1)), *r = malloc(sizeof(float) * ldo * (a.nq ? a.nq : 1));
+    float *q = rnd((size_t)ldq * nq * nb, seed, 1), *k = rnd((size_t)ldk * nk * nb, seed + 1, 1),
+          *v = rnd((size_t)ldv * nk * nb, seed + 2, 1);
+    float *o = malloc(sizeof(float) * ldo * nq * nb), *r = malloc(sizeof(float) * ldo * nq * nb);
     a.q = q, a.k = k, a.v = v, a.ldq = ldq, a.ldk = ldk, a.ldv = ldv, a.ldo = ldo, a.out = o;
+    a.bsq = ldq * nq, a.bsk = ldk * nk, a.bsv = ldv * nk, a.bso = ldo * nq;
     g3d_nn_attn ar = a;
     ar.out = r;
     nn_ref_attend(&ar);
@@ -246,7 +247,7 @@ static void check_attention(g3d_nn_attn a, uint64_t seed, const char *what)
         int old = nn_isa_force(isas[i]);
         CHECK_OK(g3d_nn_attend(&a));
         double e = 0;
-        for (int t = 0; t < a.nq; t++) e = fmax(e, err(o + (size_t)t * ldo, r + (size_t)t * ldo, (size_t)a.heads * hdv));
+        for (int t = 0; t < a.nq * nb; t++) e = fmax(e, err(o + (size_t)t * ldo, r + (size_t)t * ldo, (size_t)a.heads * hdv));
         CHECK_MSG(e < 1e-5, "%s (isa %d): err %g", what, isas[i], e);
         nn_isa_force(old);
     }
@@ -255,8 +256,10 @@ static void check_attention(g3d_nn_attn a, uint64_t seed, const char *what)
 
 TEST(attention_against_reference)
 {
-    float *dense = rnd(3 * 130 * 250, 7, 2);
-    g3d_nn_bias_dense bd = {dense, 130 * 250, 250};
+    float *dense = rnd(3 * 130 * 250, 7, 2), *tables = rnd(3 * 2 * (4 + 5) * 20, 8, 1);
+    g3d_nn_bias_dense bd = {dense, 130 * 250, 250}, bd49 = {dense, 49 * 49, 49};
+    /* per window (3) and head (2): rh [4 keys rows x 20], rw [5 x 20] */
+    g3d_nn_bias_relpos rp = {tables, tables + 3 * 2 * 4 * 20, 20, 4, 5, 2};
     struct {
         g3d_nn_attn a;
         const char *what;
@@ -269,11 +272,17 @@ TEST(attention_against_reference)
         {{.nq = 130, .nk = 250, .heads = 3, .hd = 24, .scale = 0.2f, .bias = g3d_nn_bias_dense_fn, .bias_ctx = &bd},
          "dense bias"},
         {{.nq = 67, .nk = 40, .heads = 1, .hd = 520, .scale = 0.04f}, "single head of 520"},
+        {{.nq = 49, .nk = 49, .heads = 3, .hd = 16, .scale = 0.25f, .batch = 7, .bias = g3d_nn_bias_dense_fn,
+          .bias_ctx = &bd49},
+         "7 windows of 49 tokens, dense bias"},
+        {{.nq = 20, .nk = 20, .heads = 2, .hd = 8, .scale = 0.3f, .batch = 3, .bias = g3d_nn_bias_relpos_fn,
+          .bias_ctx = &rp},
+         "3 windows, relative positions"},
         {{.nq = 0, .nk = 10, .heads = 2, .hd = 8, .scale = 1}, "no queries"},
         {{.nq = 9, .nk = 0, .heads = 2, .hd = 8, .scale = 1}, "no keys"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) check_attention(cases[i].a, 100 + i, cases[i].what);
-    free(dense);
+    free(dense), free(tables);
     g3d_nn_attn bad = {.nq = 3, .nk = 3, .heads = 0, .hd = 4};
     CHECK_FAILS(g3d_nn_attend(&bad));
     bad.heads = 2, bad.ldq = 5;

@@ -223,7 +223,7 @@ TEST(attention)
     float *rq = get("rq", NULL), *rk = get("rk", NULL), *rv = get("rv", NULL), *relh = get("rel_h", NULL),
           *relw = get("rel_w", NULL), rh[2 * 20 * 4], rw[2 * 20 * 5], o20[20 * 12];
     CHECK_OK(g3d_nn_relpos_tables(rq, 12, 2, 6, 4, 5, 4, 5, relh, relw, rh, rw));
-    g3d_nn_bias_relpos rp = {rh, rw, 20, 4, 5};
+    g3d_nn_bias_relpos rp = {rh, rw, 20, 4, 5, 2};
     a = (g3d_nn_attn){.nq = 20, .nk = 20, .heads = 2, .hd = 6, .q = rq, .k = rk, .v = rv, .out = o20,
                       .scale = 1.0f / sqrtf(6.0f), .bias = g3d_nn_bias_relpos_fn, .bias_ctx = &rp};
     CHECK_OK(g3d_nn_attend(&a));

@@ -21,10 +21,12 @@
 extern "C" {
 #endif
 
-/* Additive score bias, supplied by the model a tile at a time: add bias(head, q0+i, k0+j) to
- * s[i*qs + j*ks] for 0 <= i < nq, 0 <= j < nk (the scores are already multiplied by scale).
- * Called concurrently from several threads: it may only read ctx. */
-typedef void (*g3d_nn_bias_fn)(void *ctx, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks);
+/* Additive score bias, supplied by the model a tile at a time: add bias(batch, head, q0+i, k0+j)
+ * to s[i*qs + j*ks] for 0 <= i < nq, 0 <= j < nk (the scores are already multiplied by scale;
+ * batch is the problem's index in a batched call, else 0). Called concurrently from several
+ * threads: it may only read ctx. */
+typedef void (*g3d_nn_bias_fn)(void *ctx, int batch, int head, int q0, int nq, int k0, int nk, float *s, long qs,
+                               long ks);
 
 typedef struct g3d_nn_attn {
     int nq, nk;           /* query and key/value token counts */
@@ -37,6 +39,10 @@ typedef struct g3d_nn_attn {
     int causal;           /* query i sees keys j <= i + nk - nq (CLIP text, a decoder with a cache) */
     g3d_nn_bias_fn bias;  /* NULL: none */
     void *bias_ctx;
+    /* a batch of independent problems of the same shape in one call (windowed attention: one
+     * problem per window): problem b reads q + b*bsq, k + b*bsk, v + b*bsv and writes out + b*bso */
+    int batch;            /* 0 = 1 */
+    long bsq, bsk, bsv, bso;
 } g3d_nn_attn;
 
 /* Runs the attention described by a. G3D_ERR_ARG for inconsistent sizes, G3D_ERR_NOMEM if
@@ -49,24 +55,26 @@ g3d_status g3d_nn_attention(const float *qkv, int n, int heads, int hd, float sc
 
 /* ---- ready-made biases ------------------------------------------------------------------ */
 
-/* A stored bias matrix per head: bias(h, i, j) = b[h*head_stride + i*ld + j] (head_stride 0 shares
- * one matrix between heads). TinyViT's attention_biases gathered through its index table fit
- * here (heads x N x N for a window of N tokens). */
+/* A stored bias matrix per head, the same for every problem of a batch: bias(b, h, i, j) =
+ * b[h*head_stride + i*ld + j] (head_stride 0 shares one matrix between heads). TinyViT's
+ * attention_biases gathered through its index table fit here (heads x N x N for a window of N
+ * tokens). */
 typedef struct g3d_nn_bias_dense {
     const float *b;
     long head_stride, ld;
 } g3d_nn_bias_dense;
-void g3d_nn_bias_dense_fn(void *ctx, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks);
+void g3d_nn_bias_dense_fn(void *ctx, int batch, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks);
 
 /* SAM's decomposed relative positions: queries and keys on grids qh x qw and kh x kw (token
- * index y*width + x); bias(h, q, k) = rh[(h*kh + ky)*nq + q] + rw[(h*kw + kx)*nq + q] with
- * (ky, kx) the key's grid position (tables key-major: the attention adds them a key at a
- * time across 64 queries). Fill them with g3d_nn_relpos_tables. */
+ * index y*width + x); with t = batch*heads + head, bias(t, q, k) = rh[(t*kh + ky)*nq + q] +
+ * rw[(t*kw + kx)*nq + q] and (ky, kx) the key's grid position (tables key-major: the attention
+ * adds them a key at a time across 64 queries). Fill them with g3d_nn_relpos_tables, once per
+ * problem of a batch (at rh + b*heads*kh*nq, rw + b*heads*kw*nq). */
 typedef struct g3d_nn_bias_relpos {
     const float *rh, *rw;
-    int nq, kh, kw;
+    int nq, kh, kw, heads;
 } g3d_nn_bias_relpos;
-void g3d_nn_bias_relpos_fn(void *ctx, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks);
+void g3d_nn_bias_relpos_fn(void *ctx, int batch, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks);
 
 /* SAM's add_decomposed_rel_pos tables from the unscaled queries q (head h at column h*hd, row
  * stride ldq) on a square-cell grid qh x qw attending to kh x kw (equal sizes, as in SAM's

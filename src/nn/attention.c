@@ -24,8 +24,12 @@ typedef struct tiles {
     float *qt, *st, *ot, *edge, *m, *l, *t1;
 } tiles;
 
-static void task(const g3d_nn_attn *a, const tiles *T, int h, int q0)
+static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0)
 {
+    /* problem b of a batch: the same descriptor with its pointers moved */
+    g3d_nn_attn pb = *in;
+    pb.q += b * in->bsq, pb.k += b * in->bsk, pb.v += b * in->bsv, pb.out += b * in->bso;
+    const g3d_nn_attn *a = &pb;
     const int hd = a->hd, hdv = a->hdv, nqv = a->nq - q0 < QB ? a->nq - q0 : QB;
     const int nvq = (nqv + 15) / 16, QW = 16 * nvq;
     float *qt = T->qt, *st = T->st, *ot = T->ot, *m = T->m, *l = T->l, *corr = T->t1;
@@ -51,7 +55,7 @@ static void task(const g3d_nn_attn *a, const tiles *T, int h, int q0)
             }
             nn_kernel(hd, ka, lda, 1, qt, QB, st + r * QB, QB, nvq, 0);
         }
-        if (a->bias) a->bias(a->bias_ctx, h, q0, nqv, k0, kb, st, 1, QB);
+        if (a->bias) a->bias(a->bias_ctx, b, h, q0, nqv, k0, kb, st, 1, QB);
         if (a->causal)
             for (int j = 0; j < kb; j++) {
                 int lim = k0 + j - q0 - shift; /* queries i < lim must not see key k0+j */
@@ -85,7 +89,8 @@ static g3d_status normalise(const g3d_nn_attn *in, g3d_nn_attn *a)
 {
     *a = *in;
     if (!a->hdv) a->hdv = a->hd;
-    if (a->nq < 0 || a->nk < 0 || a->heads <= 0 || a->hd <= 0 || a->hdv <= 0)
+    if (!a->batch) a->batch = 1;
+    if (a->nq < 0 || a->nk < 0 || a->heads <= 0 || a->hd <= 0 || a->hdv <= 0 || a->batch < 0)
         return G3D_ERR(G3D_ERR_ARG, "attention: bad sizes (%d queries, %d keys, %d heads of %d/%d)", a->nq, a->nk,
                        a->heads, a->hd, a->hdv);
     if (!a->ldq) a->ldq = (long)a->heads * a->hd;
@@ -103,7 +108,7 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
     g3d_nn_attn a;
     G3D_TRY(normalise(desc, &a));
     if (a.nq == 0) return G3D_OK;
-    const int nqb = (a.nq + QB - 1) / QB, ntask = a.heads * nqb;
+    const int nqb = (a.nq + QB - 1) / QB, ntask = a.batch * a.heads * nqb;
     int nth = omp_in_parallel() ? 1 : omp_get_max_threads();
     if (nth > ntask) nth = ntask;
     const int edge = NN_MR * (a.hd > KB ? a.hd : KB);
@@ -123,7 +128,7 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
         }
 #pragma omp for schedule(dynamic, 1)
         for (int t = 0; t < ntask; t++)
-            if (buf) task(&a, &T, t / nqb, (t % nqb) * QB);
+            if (buf) task(&a, &T, t / (a.heads * nqb), t / nqb % a.heads, (t % nqb) * QB);
         free(buf);
     }
     if (failed) return G3D_ERR(G3D_ERR_NOMEM, "attention: cannot allocate the per-thread tiles");
@@ -139,20 +144,22 @@ g3d_status g3d_nn_attention(const float *qkv, int n, int heads, int hd, float sc
 }
 
 /* ---- biases ------------------------------------------------------------------------------- */
-void g3d_nn_bias_dense_fn(void *ctx, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks)
+void g3d_nn_bias_dense_fn(void *ctx, int batch, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks)
 {
     const g3d_nn_bias_dense *d = ctx;
+    (void)batch;
     for (int i = 0; i < nq; i++) {
         const float *b = d->b + head * d->head_stride + (long)(q0 + i) * d->ld + k0;
         for (int j = 0; j < nk; j++) s[i * qs + j * ks] += b[j];
     }
 }
 
-void g3d_nn_bias_relpos_fn(void *ctx, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks)
+void g3d_nn_bias_relpos_fn(void *ctx, int batch, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks)
 {
     const g3d_nn_bias_relpos *r = ctx;
     /* tables are key-major, so the queries of one key are contiguous like the tile's columns */
-    const float *rh = r->rh + (long)head * r->kh * r->nq + q0, *rw = r->rw + (long)head * r->kw * r->nq + q0;
+    const long hb = (long)batch * r->heads + head;
+    const float *rh = r->rh + hb * r->kh * r->nq + q0, *rw = r->rw + hb * r->kw * r->nq + q0;
     for (int j = 0; j < nk; j++) {
         const float *h = rh + (long)((k0 + j) / r->kw) * r->nq, *w = rw + (long)((k0 + j) % r->kw) * r->nq;
         float *sj = s + j * ks;
@@ -201,27 +208,28 @@ void nn_ref_attend(const g3d_nn_attn *desc)
         free(s), free(p);
         return;
     }
-    for (int h = 0; h < a.heads; h++)
-        for (int i = 0; i < a.nq; i++) {
-            const float *qi = a.q + (long)i * a.ldq + h * a.hd;
-            for (int j = 0; j < a.nk; j++) {
-                double d = 0;
-                for (int c = 0; c < a.hd; c++) d += (double)qi[c] * a.k[(long)j * a.ldk + h * a.hd + c];
-                s[j] = (float)(d * a.scale);
-            }
-            if (a.bias) a.bias(a.bias_ctx, h, i, 1, 0, a.nk, s, 0, 1);
-            double mx = -INFINITY, sum = 0;
-            for (int j = 0; j < a.nk; j++) {
-                if (a.causal && j > i + a.nk - a.nq) s[j] = -INFINITY;
-                mx = s[j] > mx ? s[j] : mx;
-            }
-            for (int j = 0; j < a.nk; j++) sum += p[j] = mx == -INFINITY ? 0.0 : exp(s[j] - mx);
-            float *o = a.out + (long)i * a.ldo + h * a.hdv;
-            for (int c = 0; c < a.hdv; c++) {
-                double acc = 0;
-                for (int j = 0; j < a.nk; j++) acc += p[j] * a.v[(long)j * a.ldv + h * a.hdv + c];
-                o[c] = sum > 0 ? (float)(acc / sum) : 0.0f;
-            }
+    for (int t = 0; t < a.batch * a.heads * a.nq; t++) {
+        const int b = t / (a.heads * a.nq), h = t / a.nq % a.heads, i = t % a.nq;
+        const float *qi = a.q + b * a.bsq + (long)i * a.ldq + h * a.hd, *kb = a.k + b * a.bsk;
+        for (int j = 0; j < a.nk; j++) {
+            double d = 0;
+            for (int c = 0; c < a.hd; c++) d += (double)qi[c] * kb[(long)j * a.ldk + h * a.hd + c];
+            s[j] = (float)(d * a.scale);
         }
+        if (a.bias) a.bias(a.bias_ctx, b, h, i, 1, 0, a.nk, s, 0, 1);
+        double mx = -INFINITY, sum = 0;
+        for (int j = 0; j < a.nk; j++) {
+            if (a.causal && j > i + a.nk - a.nq) s[j] = -INFINITY;
+            mx = s[j] > mx ? s[j] : mx;
+        }
+        for (int j = 0; j < a.nk; j++) sum += p[j] = mx == -INFINITY ? 0.0 : exp(s[j] - mx);
+        float *o = a.out + b * a.bso + (long)i * a.ldo + h * a.hdv;
+        const float *vb = a.v + b * a.bsv;
+        for (int c = 0; c < a.hdv; c++) {
+            double acc = 0;
+            for (int j = 0; j < a.nk; j++) acc += p[j] * vb[(long)j * a.ldv + h * a.hdv + c];
+            o[c] = sum > 0 ? (float)(acc / sum) : 0.0f;
+        }
+    }
     free(s), free(p);
 }
