@@ -37,6 +37,17 @@ void nn_widen(g3d_dtype t, const uint16_t *src, float *dst, long n)
 }
 
 /* ---- packing B --------------------------------------------------------------------------- */
+typedef float v16u __attribute__((vector_size(64), aligned(4), may_alias));
+
+/* Copies n <= 64 floats. Packing copies such short runs by the million; GCC turns a memcpy of
+ * unknown small size into `rep movs`, whose start-up costs more than the copy. */
+static inline void copy_run(float *restrict d, const float *restrict s, int n)
+{
+    int i = 0;
+    for (; i + 16 <= n; i += 16) *(v16u *)(d + i) = *(const v16u *)(s + i);
+    for (; i < n; i++) d[i] = s[i];
+}
+
 /* Panel q of a packed block holds rows 0..kc-1 of columns 64q..64q+63 at bp + q*kc*64; the
  * columns past nt up to the next multiple of 16 are zero so the kernel can read them. */
 static void zero_tail(float *bp, int kc, int nt)
@@ -55,7 +66,7 @@ static void pack_rows(const float *b, long ldb, int k0, int kc, int n0, int nt, 
         const float *src = b + (long)(k0 + k) * ldb + n0;
         for (int q = 0; q * 64 < nt; q++) {
             int cols = nt - 64 * q < 64 ? nt - 64 * q : 64;
-            memcpy(bp + ((long)q * kc + k) * 64, src + 64 * q, sizeof(float) * cols);
+            copy_run(bp + ((long)q * kc + k) * 64, src + 64 * q, cols);
         }
     }
     zero_tail(bp, kc, nt);
@@ -97,12 +108,16 @@ static int pad_index(g3d_nn_padmode m, int i, int n)
     return i < 0 ? 0 : i >= n ? n - 1 : i;
 }
 
-static void pack_conv(const nn_convsrc *s, int k0, int kc, const piece *p, int np, int nt, float *bp)
+/* Cloned per instruction set: the stride-2 gathers of downsampling convolutions vectorise
+ * with AVX-512's two-register permutes. */
+__attribute__((target_clones("avx512f", "avx2", "default"))) static void
+pack_conv(const nn_convsrc *s, int k0, int kc, const piece *p, int np, int nt, float *bp)
 {
     const int h = s->h, w = s->w, st = s->stride;
     const int zeros = s->pad == G3D_PAD_ZEROS;
-    for (int k = 0; k < kc; k++) {
-        int kk = k0 + k, c = kk / s->ntaps, tp = kk % s->ntaps, dy = s->dy[tp], dx = s->dx[tp];
+    int c = k0 / s->ntaps, tp = k0 % s->ntaps; /* channel and tap of row k0 + k */
+    for (int k = 0; k < kc; k++, tp = tp + 1 == s->ntaps ? (c++, 0) : tp + 1) {
+        const int dy = s->dy[tp], dx = s->dx[tp];
         const float *plane = s->x + (size_t)c * h * w;
         for (int e = 0; e < np; e++) {
             float *d = bp + (long)(p[e].t >> 6) * kc * 64 + (long)k * 64 + (p[e].t & 63);
@@ -124,7 +139,9 @@ static void pack_conv(const nn_convsrc *s, int k0, int kc, const piece *p, int n
             if (hi < lo) hi = lo;
             for (int u = 0; u < lo; u++) d[u] = zeros ? 0.0f : row[pad_index(s->pad, ix0 + u * st, w)];
             if (st == 1)
-                memcpy(d + lo, row + ix0 + lo, sizeof(float) * (hi - lo));
+                copy_run(d + lo, row + ix0 + lo, hi - lo);
+            else if (st == 2) /* a constant stride vectorises */
+                for (int u = lo; u < hi; u++) d[u] = row[ix0 + 2 * u];
             else
                 for (int u = lo; u < hi; u++) d[u] = row[ix0 + u * st];
             for (int u = hi; u < len; u++) d[u] = zeros ? 0.0f : row[pad_index(s->pad, ix0 + u * st, w)];
@@ -199,11 +216,17 @@ static void epilogue(const nn_gemm *g, float *ct, long ldc, int m0, int mt, int 
             else
                 memcpy(y + n0, v, sizeof(float) * nt);
         } else {
+            /* runs along one output row: strided stores, no per-element index arithmetic */
             int qy = n0 / g->qw, qx = n0 % g->qw;
-            for (int j = 0; j < nt; j++) {
-                long off = qy * g->oys + qx * g->oxs + g->ooff;
-                y[off] = r ? r[off] + v[j] : v[j];
-                if (++qx == g->qw) qx = 0, qy++;
+            for (int j = 0; j < nt; qx = 0, qy++) {
+                const int len = g->qw - qx < nt - j ? g->qw - qx : nt - j;
+                const long off = qy * g->oys + qx * g->oxs + g->ooff, st = g->oxs;
+                float *yy = y + off;
+                if (r)
+                    for (int u = 0; u < len; u++) yy[u * st] = r[off + u * st] + v[j + u];
+                else
+                    for (int u = 0; u < len; u++) yy[u * st] = v[j + u];
+                j += len;
             }
         }
     }
