@@ -23,6 +23,16 @@ static float *get(const char *name, int64_t *numel)
 
 static const int64_t *shape(const char *name) { return g3d_ckpt_find(ck, name)->shape; }
 
+/* A layer's "<name>_w" and "<name>_b"; returns the weight's shape. */
+static const int64_t *get_layer(const char *name, float **w, float **b)
+{
+    char wn[64], bn[64];
+    snprintf(wn, sizeof wn, "%s_w", name);
+    snprintf(bn, sizeof bn, "%s_b", name);
+    *w = get(wn, NULL), *b = get(bn, NULL);
+    return shape(wn);
+}
+
 static void compare(const char *name, const float *got, int64_t n)
 {
     int64_t nref = 0;
@@ -54,11 +64,8 @@ TEST(conv2d)
     };
     float *x = get("x", NULL);
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
-        char wn[64], bn[64];
-        snprintf(wn, sizeof wn, "%s_w", cases[i].name);
-        snprintf(bn, sizeof bn, "%s_b", cases[i].name);
-        float *w = get(wn, NULL), *b = get(bn, NULL);
-        const int cout = (int)shape(wn)[0];
+        float *w, *b;
+        const int cout = (int)get_layer(cases[i].name, &w, &b)[0];
         g3d_nn_conv c = g3d_nn_conv_make(6, cout, cases[i].k, cases[i].s, cases[i].p, w, b);
         c.dilation = cases[i].d, c.groups = cases[i].g, c.pad_mode = cases[i].mode;
         int ho, wo;
@@ -72,10 +79,8 @@ TEST(conv2d)
     float *x16 = get("x16", NULL), y16[18 * 9 * 11];
     static const char *const wn16[] = {"w3", "w3_reflect"};
     for (int i = 0; i < 2; i++) {
-        char wn[64], bn[64];
-        snprintf(wn, sizeof wn, "%s_w", wn16[i]);
-        snprintf(bn, sizeof bn, "%s_b", wn16[i]);
-        float *w = get(wn, NULL), *b = get(bn, NULL);
+        float *w, *b;
+        get_layer(wn16[i], &w, &b);
         g3d_nn_conv c = g3d_nn_conv_make(24, 18, 3, 1, 1, w, b);
         c.pad_mode = i ? G3D_PAD_REFLECT : G3D_PAD_ZEROS;
         CHECK_OK(g3d_nn_conv_prepare(&c));
@@ -103,11 +108,8 @@ TEST(conv_transpose2d)
                  {"t4s2p1", 4, 2, 1, 0, 1}, {"t3s2d2", 3, 2, 2, 1, 2}, {"t1s3", 1, 3, 0, 2, 1}};
     float *x = get("xt", NULL);
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
-        char wn[64], bn[64];
-        snprintf(wn, sizeof wn, "%s_w", cases[i].name);
-        snprintf(bn, sizeof bn, "%s_b", cases[i].name);
-        float *w = get(wn, NULL), *b = get(bn, NULL);
-        const int cout = (int)shape(wn)[1];
+        float *w, *b;
+        const int cout = (int)get_layer(cases[i].name, &w, &b)[1];
         g3d_nn_conv c = g3d_nn_conv_make(6, cout, cases[i].k, cases[i].s, cases[i].p, w, b);
         c.transposed = 1, c.output_padding = cases[i].op, c.dilation = cases[i].d;
         int ho, wo;
