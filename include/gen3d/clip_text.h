@@ -26,6 +26,7 @@
 
 #include "gen3d/base.h"
 #include "gen3d/ckpt.h"
+#include "gen3d/nn.h" /* g3d_act */
 
 #include <stdint.h>
 
@@ -113,7 +114,7 @@ typedef struct g3d_clip_text_config {
     int layers;          /* transformer blocks in the file */
     int run_layers;      /* blocks the output uses: all, or all but the last (SD 2.x) */
     int mlp;             /* hidden width of the MLP */
-    int act;             /* g3d_act: G3D_ACT_QUICK_GELU or G3D_ACT_GELU */
+    g3d_act act;         /* G3D_ACT_QUICK_GELU or G3D_ACT_GELU */
     int pad_id;          /* the family's padding id: 49407-style end token (-1: the tokenizer's), or 0 */
     float eps;           /* LayerNorm epsilon (1e-5) */
 } g3d_clip_text_config;
