@@ -108,7 +108,7 @@ typedef enum g3d_clip_family {
 
 typedef struct g3d_clip_text_config {
     g3d_clip_family family;
-    const char *prefix;  /* key prefix in the checkpoint, e.g. "cond_stage_model.model." */
+    const char *prefix;  /* key prefix in the checkpoint, e.g. "cond_stage_model.model." (static) */
     int vocab, context;  /* from token_embedding and position_embedding */
     int width, heads;    /* heads = width / 64 */
     int layers;          /* transformer blocks in the file */
@@ -131,6 +131,9 @@ g3d_status g3d_clip_text_load(const char *path, g3d_clip_text **out);
  * a Hugging Face config.json or NULL. */
 g3d_status g3d_clip_text_load_ckpt(const g3d_ckpt *ck, const char *cfg_json, g3d_clip_text **out);
 void g3d_clip_text_free(g3d_clip_text *m);
+/* The configuration alone, read from an open checkpoint's tensors (and config.json, or NULL)
+ * without loading the weights; the same errors as loading. */
+g3d_status g3d_clip_text_probe(const g3d_ckpt *ck, const char *cfg_json, g3d_clip_text_config *c);
 
 /* The encoder's configuration (owned by it). */
 const g3d_clip_text_config *g3d_clip_text_get_config(const g3d_clip_text *m);

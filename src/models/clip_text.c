@@ -23,7 +23,6 @@ typedef struct clip_block {
 
 struct g3d_clip_text {
     g3d_clip_text_config cfg;
-    char prefix[64];
     g3d_ckpt *own;                    /* the checkpoint when the encoder opened it */
     const g3d_tensor_info *tok;       /* token embedding [vocab, width], read row by row */
     float *pos, *lnfw, *lnfb;         /* [context, width], final LayerNorm */
@@ -120,9 +119,7 @@ static int locate(const g3d_ckpt *ck, const char **prefix)
     return -1;
 }
 
-/* The configuration from the tensors (and a Hugging Face config.json); G3D_ERR_MODEL naming
- * the first missing tensor when there is no text tower. */
-static g3d_status configure(const g3d_ckpt *ck, const char *cfg_json, g3d_clip_text_config *c, char *prefix, size_t n)
+g3d_status g3d_clip_text_probe(const g3d_ckpt *ck, const char *cfg_json, g3d_clip_text_config *c)
 {
     const char *p = NULL;
     int fam = locate(ck, &p);
@@ -136,9 +133,8 @@ static g3d_status configure(const g3d_ckpt *ck, const char *cfg_json, g3d_clip_t
         return G3D_ERR(G3D_ERR_MODEL, "%s: no CLIP text encoder (missing tensor %s, or token_embedding.weight of "
                        "an OpenCLIP layout)", g3d_ckpt_path(ck), want);
     }
-    snprintf(prefix, n, "%s", p);
     c->family = (g3d_clip_family)fam;
-    c->prefix = prefix;
+    c->prefix = p;
     c->eps = 1e-5f;
     int hf = fam == G3D_CLIP_HF;
     const g3d_tensor_info *te = findf(ck, p, hf ? "text_model.embeddings.token_embedding.weight" : "token_embedding.weight");
@@ -236,10 +232,9 @@ g3d_status g3d_clip_text_load_ckpt(const g3d_ckpt *ck, const char *cfg_json, g3d
     *out = NULL;
     g3d_clip_text *m = calloc(1, sizeof *m);
     if (!m) return G3D_ERR(G3D_ERR_NOMEM, "out of memory loading the text encoder");
-    g3d_status rc = configure(ck, cfg_json, &m->cfg, m->prefix, sizeof m->prefix);
-    m->cfg.prefix = m->prefix;
+    g3d_status rc = g3d_clip_text_probe(ck, cfg_json, &m->cfg);
     const g3d_clip_text_config *c = &m->cfg;
-    const char *p = m->prefix;
+    const char *p = c->prefix;
     int hf = c->family == G3D_CLIP_HF, D = c->width;
     if (rc == G3D_OK) {
         m->tok = findf(ck, p, hf ? "text_model.embeddings.token_embedding.weight" : "token_embedding.weight");
