@@ -54,7 +54,7 @@ TEST(sd1_single_file)
     char d[256];
     printf("  %s\n", g3d_clip_text_describe(c, d, sizeof d));
     CHECK(c->family == G3D_CLIP_HF && !strcmp(c->prefix, "cond_stage_model.transformer.") && c->width == 128 &&
-          c->heads == 2 && c->layers == 3 && c->run_layers == 3 && c->mlp == 512 && c->vocab == 1975 &&
+          c->heads == 2 && c->layers == 3 && c->run_layers == 3 && c->mlp == 512 && c->vocab == g3d_clip_tokenizer_size(g_tok) &&
           c->act == G3D_ACT_QUICK_GELU && c->pad_id == -1);
     CHECK(g3d_clip_text_pad_id(m, g_tok) == g3d_clip_tokenizer_eot(g_tok));
     check_model(m, "sd1", 0);
@@ -164,7 +164,7 @@ TEST(bad_input)
     for (int i = 0; i < 77 * 128; i++) finite &= isfinite(out[i]);
     CHECK(finite);
     CHECK_FAILS(g3d_clip_text_forward(m, ids, 78, out, NULL));
-    ids[3] = 1975;
+    ids[3] = g3d_clip_tokenizer_size(g_tok);
     CHECK_FAILS(g3d_clip_text_forward(m, ids, 77, out, NULL));
     free(out);
     g3d_clip_text_free(m);

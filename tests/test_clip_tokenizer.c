@@ -56,7 +56,7 @@ TEST(official_layout)
         const char *text = cJSON_GetObjectItem(c, "text")->valuestring;
         ncase++;
         char *cl = NULL;
-        CHECK_OK(g3d_clip_clean_text(text, &cl));
+        CHECK_OK(g3d_clip_clean_text(text, G3D_CLIP_CLEAN_OFFICIAL, &cl));
         if (cl && !strcmp(cl, cJSON_GetObjectItem(c, "clean")->valuestring)) clean_ok++;
         else printf("  clean-up of \"%.40s\": got \"%.60s\", expected \"%.60s\"\n", text, cl ? cl : "",
                     cJSON_GetObjectItem(c, "clean")->valuestring);
@@ -122,20 +122,27 @@ TEST(hugging_face_layout)
     CHECK_OK(g3d_clip_tokenizer_load(dir, &t));
     if (t) {
         CHECK(g3d_clip_tokenizer_pad(t) == cJSON_GetArrayItem(map, 0)->valueint); /* "!" is the first byte symbol */
-        int ok = 0, ncase = 0;
+        int ok = 0, hf_ok = 0, ncase = 0;
         const cJSON *c;
         cJSON_ArrayForEach(c, cJSON_GetObjectItem(g_cases, "cases"))
         {
             const char *text = cJSON_GetObjectItem(c, "text")->valuestring;
             int32_t *ids = NULL;
             int n = 0;
+            /* by default Hugging Face's own clean-up (with ftfy): no html.unescape */
+            CHECK_OK(g3d_clip_encode(t, text, &ids, &n));
+            hf_ok += same_ids("HF clean-up ids", text, ids, n, cJSON_GetObjectItem(c, "hf_ftfy_ids"), NULL);
+            free(ids);
+            g3d_clip_tokenizer_set_clean(t, G3D_CLIP_CLEAN_OFFICIAL);
             CHECK_OK(g3d_clip_encode(t, text, &ids, &n));
             ok += same_ids("HF ids", text, ids, n, cJSON_GetObjectItem(c, "ids"), map);
+            g3d_clip_tokenizer_set_clean(t, G3D_CLIP_CLEAN_HF_FTFY);
             ncase++;
             free(ids);
         }
-        printf("  Hugging Face layout: %d of %d prompts identical\n", ok, ncase);
-        CHECK(ok == ncase);
+        printf("  Hugging Face layout: %d of %d prompts identical with Hugging Face's clean-up, %d with OpenAI's\n",
+               hf_ok, ncase, ok);
+        CHECK(ok == ncase && hf_ok == ncase);
         g3d_clip_tokenizer_free(t);
     }
     /* the merges file alone, vocab.json beside it */
@@ -160,7 +167,7 @@ TEST(bad_input)
     if (!t) return;
     int32_t ids[77];
     char *cl = NULL;
-    CHECK_FAILS(g3d_clip_clean_text("bad \xC3\x28 utf-8", &cl));
+    CHECK_FAILS(g3d_clip_clean_text("bad \xC3\x28 utf-8", G3D_CLIP_CLEAN_HF_FTFY, &cl));
     CHECK_FAILS(g3d_clip_tokenize(t, "overlong \xE0\x80\xAF", 77, 0, ids, NULL));
     CHECK_FAILS(g3d_clip_tokenize(t, "surrogate \xED\xA0\x80", 77, 0, ids, NULL));
     CHECK_FAILS(g3d_clip_tokenize(t, "short", 1, 0, ids, NULL));

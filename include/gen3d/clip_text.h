@@ -14,8 +14,8 @@
  * fix_text (HTML entities, Windows-1252 C1 characters, Latin ligatures, full-width forms, curly
  * quotes, line breaks, terminal escapes, control characters, NFC; not its mojibake repair),
  * html.unescape twice, white space collapsed and trimmed, Python's lower() (full mappings,
- * final sigma). Hugging Face's CLIPTokenizer does the same when ftfy is installed (docs/text.md
- * says what it does otherwise). Then the pre-tokenisation pattern, UTF-8 bytes mapped to
+ * final sigma). Hugging Face's CLIPTokenizer, with ftfy installed, does the same less the
+ * html.unescape passes (G3D_CLIP_CLEAN_HF_FTFY; docs/text.md says what it does without ftfy). Then the pre-tokenisation pattern, UTF-8 bytes mapped to
  * characters, BPE merges with "</w>" ending each word, and the framing: start token, at most
  * context-2 tokens, end token, padding. The tables come from scripts/gen_clip_unicode.py.
  *
@@ -71,9 +71,19 @@ void g3d_clip_tokenizer_set_openclip(g3d_clip_tokenizer *t, int openclip);
 /* The token string of an id (byte symbols as the vocabulary spells them), or NULL. */
 const char *g3d_clip_tokenizer_token(const g3d_clip_tokenizer *t, int32_t id);
 
-/* The text after the official clean-up (what the pre-tokenisation pattern sees), malloc'd
- * UTF-8 the caller frees. G3D_ERR_ARG if `text` is not valid UTF-8. */
-g3d_status g3d_clip_clean_text(const char *text, char **out);
+/* Which text clean-up runs before the pattern (docs/text.md compares them). */
+typedef enum g3d_clip_clean {
+    G3D_CLIP_CLEAN_OFFICIAL, /* OpenAI CLIP / OpenCLIP: ftfy, html.unescape twice, white space, lower() */
+    G3D_CLIP_CLEAN_HF_FTFY   /* Hugging Face's CLIPTokenizer with ftfy installed: the same less html.unescape */
+} g3d_clip_clean;
+/* Sets the clean-up. The default is the one the vocabulary's own code uses: HF_FTFY for a
+ * Hugging Face vocab.json + merges.txt, OFFICIAL for a merges file alone. Call before sharing
+ * the tokenizer between threads. */
+void g3d_clip_tokenizer_set_clean(g3d_clip_tokenizer *t, g3d_clip_clean mode);
+
+/* The text after a clean-up (what the pre-tokenisation pattern sees), malloc'd UTF-8 the
+ * caller frees. G3D_ERR_ARG if `text` is not valid UTF-8. */
+g3d_status g3d_clip_clean_text(const char *text, g3d_clip_clean mode, char **out);
 
 /* BPE ids of `text` without start, end or padding: *ids is malloc'd (caller frees; NULL when
  * *n is 0). */

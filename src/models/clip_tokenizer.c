@@ -472,8 +472,24 @@ static void py_lower(const cpbuf *in, cpbuf *out)
     }
 }
 
-/* The whole clean-up: whitespace_clean(basic_clean(text)).lower(). */
-static g3d_status clean(const char *text, cpbuf *out)
+/* Runs of white space become one space, none at either end (whitespace_clean, and
+ * " ".join(text.split()) alike). */
+static void collapse_space(const cpbuf *c, cpbuf *d)
+{
+    for (size_t i = 0; i < c->n; i++) {
+        if (uc_flags(c->v[i]) & UC_SPACE) {
+            while (i + 1 < c->n && (uc_flags(c->v[i + 1]) & UC_SPACE)) i++;
+            if (d->n && i + 1 < c->n) cp_push(d, ' ');
+            continue;
+        }
+        cp_push(d, c->v[i]);
+    }
+}
+
+/* The clean-up of the chosen family:
+ *   official: whitespace_clean(basic_clean(text)).lower(), basic_clean = ftfy + html.unescape x2
+ *   hf-ftfy:  whitespace_clean(ftfy.fix_text(text)).lower() */
+static g3d_status clean(const char *text, g3d_clip_clean mode, cpbuf *out)
 {
     cpbuf in = {0}, a = {0}, b = {0}, c = {0}, d = {0};
     g3d_status rc = G3D_OK;
@@ -481,17 +497,13 @@ static g3d_status clean(const char *text, cpbuf *out)
         rc = G3D_ERR(G3D_ERR_ARG, "the prompt is not valid UTF-8");
     else {
         ftfy_fix_text(&in, &a);
-        html_unescape(&a, &b);
-        html_unescape(&b, &c);
-        /* runs of white space become one space; none at either end */
-        for (size_t i = 0; i < c.n; i++) {
-            if (uc_flags(c.v[i]) & UC_SPACE) {
-                while (i + 1 < c.n && (uc_flags(c.v[i + 1]) & UC_SPACE)) i++;
-                if (d.n && i + 1 < c.n) cp_push(&d, ' ');
-                continue;
-            }
-            cp_push(&d, c.v[i]);
+        const cpbuf *fixed = &a;
+        if (mode == G3D_CLIP_CLEAN_OFFICIAL) {
+            html_unescape(&a, &b);
+            html_unescape(&b, &c);
+            fixed = &c;
         }
+        collapse_space(fixed, &d);
         py_lower(&d, out);
         if (in.oom | a.oom | b.oom | c.oom | d.oom | out->oom) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory cleaning a prompt");
     }
@@ -503,11 +515,11 @@ static g3d_status clean(const char *text, cpbuf *out)
     return rc;
 }
 
-g3d_status g3d_clip_clean_text(const char *text, char **out)
+g3d_status g3d_clip_clean_text(const char *text, g3d_clip_clean mode, char **out)
 {
     cpbuf t = {0};
     *out = NULL;
-    g3d_status rc = clean(text, &t);
+    g3d_status rc = clean(text, mode, &t);
     if (rc == G3D_OK) {
         char *s = malloc(4 * t.n + 1);
         if (!s) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory cleaning a prompt");
@@ -584,6 +596,7 @@ struct g3d_clip_tokenizer {
     size_t store_n, store_cap;
     int32_t sot, eot, pad;
     const char *special[2]; /* the start and end strings the pattern recognises in a prompt */
+    g3d_clip_clean mode;
     char byte_sym[256][3]; /* UTF-8 of the character each byte stands for (bytes_to_unicode) */
     unsigned char byte_len[256];
 };
@@ -775,6 +788,7 @@ static g3d_status build(const char *label, char *text, size_t n, const cJSON *vo
     t->sot = map_get(&t->vocab, "<|startoftext|>", 15);
     t->eot = map_get(&t->vocab, "<|endoftext|>", 13);
     t->pad = vocab ? t->eot : -1; /* Hugging Face's default pad_token is <|endoftext|> */
+    t->mode = vocab ? G3D_CLIP_CLEAN_HF_FTFY : G3D_CLIP_CLEAN_OFFICIAL;
     if (t->sot < 0 || t->eot < 0) {
         g3d_clip_tokenizer_free(t);
         return G3D_ERR(G3D_ERR_FORMAT, "%s: no <|startoftext|> or <|endoftext|> token in the vocabulary", label);
@@ -984,6 +998,8 @@ void g3d_clip_tokenizer_set_openclip(g3d_clip_tokenizer *t, int openclip)
     t->special[1] = openclip ? "<end_of_text>" : "<|endoftext|>";
 }
 
+void g3d_clip_tokenizer_set_clean(g3d_clip_tokenizer *t, g3d_clip_clean mode) { t->mode = mode; }
+
 const char *g3d_clip_tokenizer_token(const g3d_clip_tokenizer *t, int32_t id)
 {
     return id >= 0 && id < t->ntoken ? t->token[id] : NULL;
@@ -1117,7 +1133,7 @@ g3d_status g3d_clip_encode(const g3d_clip_tokenizer *t, const char *text, int32_
     *ids = NULL;
     *n = 0;
     cpbuf c = {0};
-    g3d_status rc = clean(text, &c);
+    g3d_status rc = clean(text, t->mode, &c);
     idbuf out = {0};
     char *w = rc == G3D_OK ? malloc(8 * c.n + 16) : NULL;
     if (rc == G3D_OK && !w) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory tokenizing a prompt");

@@ -17,6 +17,9 @@ static const char *DESCRIPTION =
     "With -m the padding and the special strings follow the model's family (SD 1.x: the end token,\n"
     "SD 2.x: 0); without it the tokenizer's configuration decides (OpenAI's merges file: 0, as\n"
     "clip.tokenize pads). A prompt longer than the context is truncated with a warning.\n"
+    "The text clean-up is OpenAI's (ftfy, HTML entities, white space, lower case) for a merges file\n"
+    "and Hugging Face's (the same without its two HTML-unescaping passes) for vocab.json + merges.txt;\n"
+    "--clean picks one.\n"
     "--encode runs the text encoder of -m (a diffusers folder or a single-file SD 1.x / 2.x\n"
     "checkpoint) and writes the embeddings [1, 77, width] to -o as .npy.";
 
@@ -29,7 +32,7 @@ static int is_dir(const char *p)
 static int run(int argc, char **argv)
 {
     g3d_cli_common common;
-    const char *tokenizer = NULL, *model = NULL, *prompt = NULL;
+    const char *tokenizer = NULL, *model = NULL, *prompt = NULL, *clean = NULL;
     int encode = 0, pad = -1;
     g3d_cli_common_init(&common);
     common.output = NULL;
@@ -38,6 +41,7 @@ static int run(int argc, char **argv)
         {0, "tokenizer", G3D_OPT_STRING, &tokenizer, "DIR|FILE", "CLIP vocabulary (default: the model's, else OpenAI's)"},
         {'m', "model", G3D_OPT_STRING, &model, "MODEL", "Stable Diffusion model (folder or file): its text encoder's family"},
         {0, "pad", G3D_OPT_INT, &pad, "ID", "padding id (-1: as the model or the tokenizer says)"},
+        {0, "clean", G3D_OPT_STRING, &clean, "official|hf", "text clean-up (default: the vocabulary's own)"},
         {0, "encode", G3D_OPT_FLAG, &encode, NULL, "write the text encoder's output for the ids to -o (.npy)"},
         G3D_COMMON_OPTS(&common),
     };
@@ -50,6 +54,8 @@ static int run(int argc, char **argv)
     if (encode && (!model || !common.output)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--encode needs -m MODEL and -o OUT.npy");
     if (!encode && common.output) return g3d_cli_errorf(G3D_EXIT_USAGE, "-o is for --encode");
     if (pad < -1) return g3d_cli_errorf(G3D_EXIT_USAGE, "--pad must be an id (0 or more) or -1");
+    if (clean && strcmp(clean, "official") && strcmp(clean, "hf"))
+        return g3d_cli_errorf(G3D_EXIT_USAGE, "--clean must be official or hf");
     common.quiet = 1; /* no seed line: nothing here is random (warnings still show) */
     g3d_cli_common_apply(&common);
 
@@ -68,6 +74,7 @@ static int run(int argc, char **argv)
     if (rc == G3D_OK && !ids) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
     if (rc == G3D_OK) {
         if (enc && g3d_clip_text_get_config(enc)->family == G3D_CLIP_OPENCLIP) g3d_clip_tokenizer_set_openclip(tok, 1);
+        if (clean) g3d_clip_tokenizer_set_clean(tok, strcmp(clean, "hf") ? G3D_CLIP_CLEAN_OFFICIAL : G3D_CLIP_CLEAN_HF_FTFY);
         int32_t p = pad >= 0 ? pad : enc ? g3d_clip_text_pad_id(enc, tok) : g3d_clip_tokenizer_pad(tok) >= 0 ? g3d_clip_tokenizer_pad(tok) : 0;
         rc = g3d_clip_tokenize(tok, prompt, context, p, ids, &info);
     }
