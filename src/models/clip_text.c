@@ -29,27 +29,33 @@ struct g3d_clip_text {
     clip_block *blocks;               /* [run_layers] */
 };
 
+/* <prefix> followed by the formatted name, into full[n]. */
+static void vname(char *full, size_t n, const char *prefix, const char *fmt, va_list ap)
+{
+    char name[256];
+    vsnprintf(name, sizeof name, fmt, ap);
+    snprintf(full, n, "%s%s", prefix, name);
+}
+
 /* The tensor <prefix><name>, or NULL. */
 static const g3d_tensor_info *findf(const g3d_ckpt *ck, const char *prefix, const char *fmt, ...)
 {
-    char name[256], full[384];
+    char full[384];
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(name, sizeof name, fmt, ap);
+    vname(full, sizeof full, prefix, fmt, ap);
     va_end(ap);
-    snprintf(full, sizeof full, "%s%s", prefix, name);
     return g3d_ckpt_find(ck, full);
 }
 
-/* Reads <prefix><name> with the given shape (1 or 2 dims) as float32 (malloc'd). */
+/* Reads <prefix><name> with the given shape ([d0], or [d0, d1] when d1 > 0) as float32 (malloc'd). */
 static g3d_status readf(const g3d_ckpt *ck, const char *prefix, float **dst, int64_t d0, int64_t d1, const char *fmt, ...)
 {
-    char name[256], full[384];
+    char full[384];
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(name, sizeof name, fmt, ap);
+    vname(full, sizeof full, prefix, fmt, ap);
     va_end(ap);
-    snprintf(full, sizeof full, "%s%s", prefix, name);
     int64_t shape[2] = {d0, d1};
     return g3d_ckpt_read_alloc(ck, full, d1 ? 2 : 1, shape, dst);
 }
@@ -188,7 +194,7 @@ static g3d_status load_block(const g3d_ckpt *ck, const g3d_clip_text_config *c, 
 {
     const char *p = c->prefix;
     int D = c->width, M = c->mlp;
-    char w[3][128], bs[3][128], ln[4][128];
+    char w[3][128], bs[3][128], ln[2][128];
     const char *wp[3] = {w[0], w[1], w[2]}, *bp[3] = {bs[0], bs[1], bs[2]};
     if (c->family == G3D_CLIP_HF) {
         static const char *const qkv[] = {"q", "k", "v"};
@@ -210,14 +216,14 @@ static g3d_status load_block(const g3d_ckpt *ck, const g3d_clip_text_config *c, 
     G3D_TRY(readf(ck, p, &b->ln1b, D, 0, "%sbias", ln[0]));
     G3D_TRY(readf(ck, p, &b->ln2w, D, 0, "%sweight", ln[1]));
     G3D_TRY(readf(ck, p, &b->ln2b, D, 0, "%sbias", ln[1]));
-    static const char *const hfn[3][2] = {{"self_attn.out_proj", ""}, {"mlp.fc1", ""}, {"mlp.fc2", ""}};
+    static const char *const hfn[3] = {"self_attn.out_proj", "mlp.fc1", "mlp.fc2"};
     static const char *const ocn[3] = {"attn.out_proj", "mlp.c_fc", "mlp.c_proj"};
     g3d_nn_lin *L[3] = {&b->out, &b->fc1, &b->fc2};
     int dims[3][2] = {{D, D}, {M, D}, {D, M}};
     for (int k = 0; k < 3; k++) {
         if (hf) {
-            snprintf(w[0], sizeof w[0], "text_model.encoder.layers.%d.%s.weight", i, hfn[k][0]);
-            snprintf(bs[0], sizeof bs[0], "text_model.encoder.layers.%d.%s.bias", i, hfn[k][0]);
+            snprintf(w[0], sizeof w[0], "text_model.encoder.layers.%d.%s.weight", i, hfn[k]);
+            snprintf(bs[0], sizeof bs[0], "text_model.encoder.layers.%d.%s.bias", i, hfn[k]);
         } else {
             snprintf(w[0], sizeof w[0], "transformer.resblocks.%d.%s.weight", i, ocn[k]);
             snprintf(bs[0], sizeof bs[0], "transformer.resblocks.%d.%s.bias", i, ocn[k]);

@@ -96,29 +96,21 @@ static void cp_push_str(cpbuf *b, const char *s)
 /* ======================================================================================
  * Table look-ups
  * ==================================================================================== */
-static int uc_flags(uint32_t c)
+/* The value of the range holding c in a sorted {first, last, value} table, or 0. */
+static int range_value(const uint32_t (*t)[3], size_t rows, uint32_t c)
 {
-    size_t lo = 0, hi = sizeof clip_uc_class / sizeof clip_uc_class[0];
+    size_t lo = 0, hi = rows;
     while (lo < hi) {
         size_t mid = (lo + hi) / 2;
-        if (c < clip_uc_class[mid][0]) hi = mid;
-        else if (c > clip_uc_class[mid][1]) lo = mid + 1;
-        else return (int)clip_uc_class[mid][2];
+        if (c < t[mid][0]) hi = mid;
+        else if (c > t[mid][1]) lo = mid + 1;
+        else return (int)t[mid][2];
     }
     return 0;
 }
 
-static int uc_ccc(uint32_t c)
-{
-    size_t lo = 0, hi = sizeof clip_uc_ccc / sizeof clip_uc_ccc[0];
-    while (lo < hi) {
-        size_t mid = (lo + hi) / 2;
-        if (c < clip_uc_ccc[mid][0]) hi = mid;
-        else if (c > clip_uc_ccc[mid][1]) lo = mid + 1;
-        else return (int)clip_uc_ccc[mid][2];
-    }
-    return 0;
-}
+static int uc_flags(uint32_t c) { return range_value(clip_uc_class, sizeof clip_uc_class / sizeof clip_uc_class[0], c); }
+static int uc_ccc(uint32_t c) { return range_value(clip_uc_ccc, sizeof clip_uc_ccc / sizeof clip_uc_ccc[0], c); }
 
 /* Row of a table sorted by its first column, or NULL. */
 static const uint32_t *find_row(const uint32_t *t, size_t rows, size_t cols, uint32_t key)
