@@ -120,12 +120,13 @@ typedef struct g3d_clip_text_config {
     g3d_clip_family family;
     const char *prefix;  /* key prefix in the checkpoint, e.g. "cond_stage_model.model." (static) */
     int vocab, context;  /* from token_embedding and position_embedding */
-    int width, heads;    /* heads = width / 64 */
+    int width, heads;    /* heads = width / 64 (config.json's num_attention_heads where given) */
     int layers;          /* transformer blocks in the file */
     int run_layers;      /* blocks the output uses: all, or all but the last (SD 2.x) */
     int mlp;             /* hidden width of the MLP */
     g3d_act act;         /* G3D_ACT_QUICK_GELU or G3D_ACT_GELU */
-    int pad_id;          /* the family's padding id: 49407-style end token (-1: the tokenizer's), or 0 */
+    int pad_id;          /* padding: 0 (OpenCLIP layout, SD 2.x), or -1: the tokenizer's pad_token,
+                            else its end token (SD 1.x) */
     float eps;           /* LayerNorm epsilon (1e-5) */
 } g3d_clip_text_config;
 
