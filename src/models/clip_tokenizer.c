@@ -593,31 +593,15 @@ struct g3d_clip_tokenizer {
     unsigned char byte_len[256];
 };
 
+static int printable_byte(int b) { return (b >= '!' && b <= '~') || (b >= 0xA1 && b <= 0xAC) || (b >= 0xAE && b <= 0xFF); }
+
 /* OpenAI's bytes_to_unicode: printable Latin-1 bytes stand for themselves, the others for
  * 256, 257, ... in byte order. */
 static void byte_symbols(g3d_clip_tokenizer *t)
 {
     int next = 256;
-    for (int b = 0; b < 256; b++) {
-        int keep = (b >= '!' && b <= '~') || (b >= 0xA1 && b <= 0xAC) || (b >= 0xAE && b <= 0xFF);
-        t->byte_len[b] = (unsigned char)utf8_put(keep ? (uint32_t)b : (uint32_t)next++, t->byte_sym[b]);
-    }
-}
-
-/* Order of the byte symbols in OpenAI's vocabulary: the kept bytes first, then the rest. */
-static int byte_order(int i)
-{
-    static int order[256], ready;
-    if (!ready) {
-        int k = 0;
-        for (int pass = 0; pass < 2; pass++)
-            for (int b = 0; b < 256; b++) {
-                int keep = (b >= '!' && b <= '~') || (b >= 0xA1 && b <= 0xAC) || (b >= 0xAE && b <= 0xFF);
-                if (keep == !pass) order[k++] = b;
-            }
-        ready = 1;
-    }
-    return order[i];
+    for (int b = 0; b < 256; b++)
+        t->byte_len[b] = (unsigned char)utf8_put(printable_byte(b) ? (uint32_t)b : (uint32_t)next++, t->byte_sym[b]);
 }
 
 /* Copies s[0, n) into the store; the stored string's offset, or -1. */
@@ -718,10 +702,11 @@ static g3d_status build(const char *label, char *text, size_t n, const cJSON *vo
     char buf[512];
     /* merge ranks ("first second" -> line index), and the vocabulary of the official derivation */
     int32_t id = 0;
-    if (!vocab)
+    if (!vocab) /* the byte symbols in bytes_to_unicode's order (printable bytes first), then with "</w>" */
         for (int w = 0; w < 2; w++)
-            for (int i = 0; i < 256; i++) {
-                int b = byte_order(i);
+            for (int i = 0; i < 512; i++) {
+                int b = i & 255;
+                if (printable_byte(b) != (i < 256)) continue;
                 size_t k = t->byte_len[b];
                 memcpy(buf, t->byte_sym[b], k);
                 if (w) memcpy(buf + k, "</w>", 4), k += 4;
@@ -929,15 +914,10 @@ static g3d_status load_merges(const char *path, g3d_clip_tokenizer **out)
 
 const char *g3d_clip_default_vocab(void)
 {
-    static char found[4096];
-    const char *env = getenv("G3D_CLIP_VOCAB");
-    const char *cand[] = {env, G3D_CLIP_VOCAB_BUILD, G3D_CLIP_VOCAB_DATADIR "/bpe_simple_vocab_16e6.js",
+    const char *cand[] = {getenv("G3D_CLIP_VOCAB"), G3D_CLIP_VOCAB_BUILD, G3D_CLIP_VOCAB_DATADIR "/bpe_simple_vocab_16e6.js",
                           G3D_CLIP_VOCAB_DATADIR "/bpe_simple_vocab_16e6.txt.gz"};
     for (size_t i = 0; i < sizeof cand / sizeof cand[0]; i++)
-        if (cand[i] && cand[i][0] && is_file(cand[i]) && strlen(cand[i]) < sizeof found) {
-            strcpy(found, cand[i]);
-            return found;
-        }
+        if (cand[i] && cand[i][0] && is_file(cand[i])) return cand[i];
     return NULL;
 }
 
