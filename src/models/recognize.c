@@ -1,6 +1,8 @@
 /* Model recognition: one table of signatures, from checkpoint content only. */
 #include "gen3d/recognize.h"
 
+#include "gen3d/clip_text.h"
+
 #include <cjson/cJSON.h>
 #include <stdio.h>
 
@@ -9,6 +11,9 @@ g3d_model_kind g3d_model_recognize(const g3d_ckpt *ck)
     if (cJSON_IsObject(cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "model_config"))) return G3D_MODEL_MOGE;
     if (g3d_ckpt_find(ck, "pretrained.blocks.0.attn.qkv.weight") && g3d_ckpt_find(ck, "depth_head.scratch.output_conv2.2.weight"))
         return G3D_MODEL_DEPTH_ANYTHING_V2;
+    g3d_clip_text_config clip;
+    if (g3d_clip_text_probe(ck, NULL, &clip) == G3D_OK) return G3D_MODEL_CLIP_TEXT;
+    g3d_error_clear();
     return G3D_MODEL_UNKNOWN;
 }
 
@@ -84,5 +89,9 @@ const char *g3d_model_describe(const g3d_ckpt *ck, char *buf, size_t n)
                  g3d_ckpt_find(ck, "scale_head.0.weight") ? ", metric scale" : "");
         return buf;
     }
+    /* a CLIP text tower, alone or inside a Stable Diffusion checkpoint */
+    g3d_clip_text_config clip;
+    if (g3d_clip_text_probe(ck, NULL, &clip) == G3D_OK) return g3d_clip_text_describe(&clip, buf, n);
+    g3d_error_clear();
     return NULL;
 }

@@ -21,7 +21,7 @@ static const char *DESCRIPTION =
     "millimetres. Depth and arrays (.pfm .npy .npz): shape, range, invalid fraction.\n"
     "PLY (.ply): point cloud or 3D Gaussians, count, SH degree, bounds, opacity range.\n"
     "Cameras (.json): our cameras.json or nerfstudio transforms.json.\n"
-    "Checkpoints (.safetensors, .pth, .pt, .ckpt): every tensor (name, dtype, shape), the parameter count, the\n"
+    "Checkpoints (.safetensors, .pth, .pt, .ckpt, .bin): every tensor (name, dtype, shape), the parameter count, the\n"
     "metadata and the recognised architecture.";
 
 static void range_line(const char *label, const float *v, size_t n, size_t stride)
@@ -152,7 +152,7 @@ static int info_checkpoint(const char *path)
     g3d_ckpt *ck;
     g3d_status rc = g3d_ckpt_open(path, &ck);
     if (rc != G3D_OK) return g3d_cli_fail(rc);
-    char arch[160];
+    char arch[256];
     const char *a = g3d_model_describe(ck, arch, sizeof arch);
     printf("%s: checkpoint, %lld tensors, %lld parameters%s%s\n", path, (long long)g3d_ckpt_count(ck),
            (long long)g3d_ckpt_numel(ck), a ? ", " : "", a ? a : "");
@@ -194,8 +194,10 @@ static int run(int argc, char **argv)
     if (!strcmp(ext, "pfm") || !strcmp(ext, "npy") || !strcmp(ext, "npz")) return info_array(pos[0], ext);
     if (!strcmp(ext, "ply")) return info_ply(pos[0]);
     if (!strcmp(ext, "json")) return info_cameras(pos[0]);
-    if (!strcmp(ext, "safetensors") || !strcmp(ext, "pth") || !strcmp(ext, "pt") || !strcmp(ext, "ckpt")) return info_checkpoint(pos[0]);
-    return g3d_cli_errorf(G3D_EXIT_FAIL, "%s: unknown file type '.%s' (png, jpg, pfm, npy, npz, ply, json, safetensors)", pos[0], ext);
+    if (!strcmp(ext, "safetensors") || !strcmp(ext, "pth") || !strcmp(ext, "pt") || !strcmp(ext, "ckpt") ||
+        !strcmp(ext, "bin"))
+        return info_checkpoint(pos[0]);
+    return g3d_cli_errorf(G3D_EXIT_FAIL, "%s: unknown file type '.%s' (png, jpg, pfm, npy, npz, ply, json, safetensors, pth, ckpt, bin)", pos[0], ext);
 }
 
 const g3d_command g3d_cmd_info = {"info", "describe an image, depth map, array, PLY, camera file or checkpoint", run};
