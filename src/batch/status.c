@@ -195,9 +195,10 @@ g3d_batch_state g3d_batch_scene_state(const char *dir, const char *id, g3d_batch
     if (locked(dir, id)) s.state = G3D_BATCH_RUNNING;
     cJSON_Delete(j);
     free(p);
+    g3d_batch_state result = s.state;
     if (st) *st = s;
     else g3d_batch_status_free(&s);
-    return s.state;
+    return result;
 }
 
 char *g3d_batch_work_dir(const char *dir, const char *id)
