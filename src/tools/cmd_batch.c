@@ -12,6 +12,7 @@
 #include <fcntl.h>
 #include <limits.h>
 #include <omp.h>
+#include <signal.h>
 #include <spawn.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -226,7 +227,7 @@ static int run_all(const batch_opts *o, const g3d_batch_manifest *m, const int *
     slot *slots = calloc((size_t)o->jobs, sizeof *slots);
     g3d_cancel cancel = g3d_cli_cancel();
     double t_start = g3d_time_now();
-    int next = 0, active = 0, finished = 0;
+    int next = 0, active = 0, finished = 0, forwarded = 0;
     if (!slots) return g3d_cli_fail(G3D_ERR_NOMEM), 1;
     while (next < ntodo || active > 0) {
         while (active < o->jobs && next < ntodo && !g3d_cancel_requested(&cancel)) {
@@ -247,6 +248,13 @@ static int run_all(const batch_opts *o, const g3d_batch_manifest *m, const int *
         if (active == 0) break;
         int status;
         pid_t pid = waitpid(-1, &status, 0);
+        if (pid < 0 && errno == EINTR && g3d_cancel_requested(&cancel) && !forwarded) {
+            /* a stop asked of this process (Ctrl-C reaches the whole group anyway; scancel
+             * or kill may not) goes on to the scenes, which clean up and exit */
+            for (int j = 0; j < o->jobs; j++)
+                if (slots[j].pid) kill(slots[j].pid, SIGTERM);
+            forwarded = 1;
+        }
         if (pid < 0) {
             if (errno == EINTR) continue;
             break;
