@@ -4,6 +4,8 @@
 #   build and run:  compiler, CMake, libraries, ffmpeg (videos)
 #   the viewer:     node and npm (bundling web/ at build time; its packages come from the
 #                   npm registry through `npm ci`), chromium (the real-browser test)
+#   --slurm:        also Slurm and munge, for the test that runs `gen3d batch --slurm` on a
+#                   one-node cluster it starts itself (tests/test_batch_slurm.sh); CI uses it
 set -eu
 
 PKGS="build-essential cmake pkg-config libstb-dev libjpeg62-turbo-dev libopenblas-dev libcjson-dev zlib1g-dev libfftw3-dev ffmpeg"
@@ -17,6 +19,11 @@ done
 command -v node >/dev/null 2>&1 || missing="$missing nodejs"
 command -v npm >/dev/null 2>&1 || missing="$missing npm"
 command -v chromium >/dev/null 2>&1 || missing="$missing chromium"
+if [ "${1:-}" = --slurm ]; then
+    for p in slurmctld slurmd slurm-client munge; do
+        dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
+    done
+fi
 
 if [ -n "$missing" ]; then
     SUDO=""

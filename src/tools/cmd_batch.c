@@ -362,7 +362,7 @@ static int status_mode(const batch_opts *o, const g3d_batch_key *keys, int nkeys
             printf(" %s", d);
             g3d_batch_status_free(&st);
         }
-        if (errors[i]) printf(" %s", errors[i]);
+        if (states[i] == G3D_BATCH_FAILED && errors[i]) printf(" %s", errors[i]);
         printf("\n");
     }
     print_counts(o->status_dir, &m, states);
@@ -588,7 +588,7 @@ static int run_batch(batch_opts *o, const g3d_batch_key *keys, int nkeys)
         int cores = o->threads > 0 ? o->threads : omp_get_num_procs();
         int threads = cores / o->jobs > 0 ? cores / o->jobs : 1;
         if (!o->quiet)
-            fprintf(stderr, "%s: %d scenes to run%s, %d at a time with %d threads each; %d skipped (finished or running)\n",
+            fprintf(stderr, "%s: %d scene(s) to run%s, %d at a time with %d thread(s) each; %d skipped (finished or running)\n",
                     m.path, ntodo, n > 1 ? " in this shard" : "", o->jobs, threads, skipped);
         double t0 = g3d_time_now();
         run_counts c = {0};
