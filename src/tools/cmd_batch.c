@@ -226,8 +226,8 @@ static int run_all(const batch_opts *o, const g3d_batch_manifest *m, const int *
 {
     slot *slots = calloc((size_t)o->jobs, sizeof *slots);
     g3d_cancel cancel = g3d_cli_cancel();
-    double t_start = g3d_time_now();
-    int next = 0, active = 0, finished = 0, forwarded = 0;
+    double done_secs = 0;
+    int ndone = 0, next = 0, active = 0, finished = 0, forwarded = 0;
     if (!slots) return g3d_cli_fail(G3D_ERR_NOMEM), 1;
     while (next < ntodo || active > 0) {
         while (active < o->jobs && next < ntodo && !g3d_cancel_requested(&cancel)) {
@@ -289,9 +289,14 @@ static int run_all(const batch_opts *o, const g3d_batch_manifest *m, const int *
             char took[32], eta[48] = "";
             format_duration(took, sizeof took, secs);
             int left = ntodo - next + active;
-            if (left > 0 && !g3d_cancel_requested(&cancel)) {
+            if (state == G3D_BATCH_DONE) {
+                done_secs += secs;
+                ndone++;
+            }
+            /* from the scenes that ran through: one failing at once says nothing of the rest */
+            if (left > 0 && ndone > 0 && !g3d_cancel_requested(&cancel)) {
                 char d[32];
-                format_duration(d, sizeof d, (g3d_time_now() - t_start) / finished * left);
+                format_duration(d, sizeof d, done_secs / ndone * ((left + o->jobs - 1) / o->jobs));
                 snprintf(eta, sizeof eta, ", ETA %s", d);
             }
             fprintf(stderr, "[%d/%d] %-6s %s (%s)%s\n", finished, ntodo, state == G3D_BATCH_DONE ? "done" : "failed",
