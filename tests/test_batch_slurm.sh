@@ -17,7 +17,7 @@ skip() {
     echo "skipped: $1"
     exit 77
 }
-for p in munged slurmctld slurmd sbatch squeue scontrol; do
+for p in munged slurmctld slurmd sbatch squeue scontrol sinfo scancel; do
     command -v $p >/dev/null 2>&1 || [ -x "/usr/sbin/$p" ] ||
         skip "no $p (Slurm and munge: sh scripts/install-deps.sh --slurm)"
 done
@@ -64,12 +64,12 @@ until sinfo -h -o %T 2>/dev/null | grep -q idle; do
 done
 ok "a one-node Slurm is up"
 
-# Waits until job $1 has left the queue (at most 5 minutes).
+# Waits until job $1 has left the queue (at most 10 minutes: a sanitizer build is slow).
 wait_job() {
     i=0
     while [ -n "$(squeue -h -j "$1" 2>/dev/null)" ]; do
         i=$((i + 1))
-        if [ $i -gt 600 ]; then bad "job $1 still queued after 5 minutes"; scancel "$1"; return 1; fi
+        if [ $i -gt 1200 ]; then bad "job $1 still queued after 10 minutes"; scancel "$1"; return 1; fi
         if [ $((i % 4)) = 1 ]; then "$GEN3D" batch --status "$O" >"$T/status.$1" 2>&1 || bad "batch --status while job $1 runs"; fi
         sleep 0.5
     done
