@@ -7,9 +7,9 @@ T="$G3D_TEST_TMP/cli_batch"
 . "$G3D_SOURCE_DIR/tests/cli_lib.sh"
 need_default_input
 mkdir -p "$T/m/in"
-# small scenes: 96 px, 60 iterations
+# small scenes: 96 px, 30 iterations
 cat >"$T/m/defaults.json" <<EOF
-{"default-input": "$MB", "max-side": 96, "steps": 2, "extra": 2, "iters": 60, "sh-degree": 0, "no-video": true}
+{"default-input": "$MB", "max-side": 96, "steps": 2, "extra": 1, "iters": 30, "sh-degree": 0, "no-video": true}
 EOF
 printf 'P5\n2 2\n255\nabcd' >"$T/m/in/broken.png"   # exists, is not a PNG: generate fails on it
 cat >"$T/m/good.jsonl" <<EOF
@@ -17,7 +17,7 @@ cat >"$T/m/good.jsonl" <<EOF
 {"id": "s1", "seed": 2, "trajectory": "rotate"}
 
 {"id": "s2", "seed": 3, "input": "in/broken.png", "depth": "in/broken.png"}
-{"id": "s3", "seed": 4, "extra": 1}
+{"id": "s3", "seed": 4, "extra": 2}
 EOF
 B="batch $T/m/good.jsonl --defaults $T/m/defaults.json"
 
@@ -56,7 +56,7 @@ expect 1 "run with a failing scene" "$GEN3D" $B -o "$T/a" -t 2
 for s in s0 s1 s3; do
     [ -s "$T/a/$s/scene.ply" ] && grep -q '"state":[[:space:]]*"done"' "$T/a/$s/status.json" && ok "$s done" || bad "$s done"
 done
-grep -q '"splats":' "$T/a/s0/status.json" && grep -q '"iters":[[:space:]]*"60"' "$T/a/s0/status.json" &&
+grep -q '"splats":' "$T/a/s0/status.json" && grep -q '"iters":[[:space:]]*"30"' "$T/a/s0/status.json" &&
     grep -q '"seed":[[:space:]]*"1"' "$T/a/s0/status.json" && ok "status has stage seconds and options" || bad "status has stage seconds and options"
 grep -q '"state":[[:space:]]*"failed"' "$T/a/s2/status.json" && grep -q 'broken.png' "$T/a/s2/status.json" &&
     ok "s2 failed, naming the file" || bad "s2 failed, naming the file"
