@@ -89,34 +89,42 @@ g3d_status g3d_batch_folder_manifest(const char *dir, char **manifest, char **de
     return rc;
 }
 
-g3d_status g3d_batch_folder_claim(const char *dir, const g3d_batch_manifest *m)
+/* An existing non-empty folder must be this manifest's batch folder. */
+static g3d_status check_owner(const char *dir, const g3d_batch_manifest *m)
 {
     char *old_m = NULL, *old_d = NULL;
+    if (g3d_batch_folder_manifest(dir, &old_m, &old_d) != G3D_OK)
+        return G3D_ERR(G3D_ERR_ARG, "%s: folder exists and is not a batch output folder; choose another", dir);
+    g3d_status rc = G3D_OK;
+    if (strcmp(old_m, m->path))
+        rc = G3D_ERR(G3D_ERR_ARG, "%s: holds the scenes of another manifest (%s); choose another output folder", dir, old_m);
+    else if (!same(old_d, m->defaults))
+        rc = G3D_ERR(G3D_ERR_ARG, "%s: was run with %s%s; give the same --defaults or another output folder", dir,
+                     old_d ? "--defaults " : "no --defaults", old_d ? old_d : "");
+    free(old_m);
+    free(old_d);
+    return rc;
+}
+
+g3d_status g3d_batch_folder_claim(const char *dir, const g3d_batch_manifest *m)
+{
     struct stat st;
     if (stat(dir, &st) == 0 && !S_ISDIR(st.st_mode)) return G3D_ERR(G3D_ERR_IO, "%s: exists and is not a folder", dir);
-    if (stat(dir, &st) == 0 && !empty_dir(dir)) {
-        if (g3d_batch_folder_manifest(dir, &old_m, &old_d) != G3D_OK)
-            return G3D_ERR(G3D_ERR_ARG, "%s: folder exists and is not a batch output folder; choose another", dir);
-        g3d_status rc = G3D_OK;
-        if (strcmp(old_m, m->path))
-            rc = G3D_ERR(G3D_ERR_ARG, "%s: holds the scenes of another manifest (%s); choose another output folder", dir, old_m);
-        else if (!same(old_d, m->defaults))
-            rc = G3D_ERR(G3D_ERR_ARG, "%s: was run with %s%s; give the same --defaults or another output folder", dir,
-                         old_d ? "--defaults " : "no --defaults", old_d ? old_d : "");
-        free(old_m);
-        free(old_d);
-        return rc;
-    }
     char *locks = path3(dir, ".batch", "locks"), *work = path3(dir, ".batch", "work"), *bj = g3d_path_join(dir, "batch.json");
     cJSON *j = cJSON_CreateObject();
     g3d_status rc = locks && work && bj && j ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
-    if (rc == G3D_OK) rc = g3d_mkdirs(locks);
-    if (rc == G3D_OK) rc = g3d_mkdirs(work);
-    if (rc == G3D_OK) {
+    if (rc == G3D_OK && stat(dir, &st) == 0 && !empty_dir(dir)) {
+        rc = check_owner(dir, m);
+    } else if (rc == G3D_OK) {
+        /* batch.json first: array tasks starting together on a new folder either find it
+         * empty (and write the same file) or find the file */
         cJSON_AddStringToObject(j, "manifest", m->path);
         if (m->defaults) cJSON_AddStringToObject(j, "defaults", m->defaults);
-        rc = write_json(bj, j);
+        rc = g3d_mkdirs(dir);
+        if (rc == G3D_OK) rc = write_json(bj, j);
     }
+    if (rc == G3D_OK) rc = g3d_mkdirs(locks);
+    if (rc == G3D_OK) rc = g3d_mkdirs(work);
     cJSON_Delete(j);
     free(locks);
     free(work);
