@@ -9,8 +9,6 @@
 # (sh scripts/install-deps.sh --slurm); skipped (exit 77) where they are missing or Slurm
 # cannot start, unless G3D_SLURM_REQUIRED=1 (CI), which makes that a failure.
 set -u
-T="$G3D_TEST_TMP/batch_slurm"
-. "$G3D_SOURCE_DIR/tests/cli_lib.sh"
 
 skip() {
     if [ "${G3D_SLURM_REQUIRED:-0}" = 1 ]; then echo "FAIL Slurm is required here: $1"; exit 1; fi
@@ -22,6 +20,8 @@ for p in munged slurmctld slurmd sbatch squeue scontrol sinfo scancel; do
         skip "no $p (Slurm and munge: sh scripts/install-deps.sh --slurm)"
 done
 [ "$(id -u)" = 0 ] || skip "the test daemons run as root"
+T="$G3D_TEST_TMP/batch_slurm"
+. "$G3D_SOURCE_DIR/tests/cli_lib.sh"
 need_default_input
 
 # The daemons' folder: short, since munge's socket path must fit in 108 bytes.
