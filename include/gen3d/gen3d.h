@@ -19,6 +19,8 @@
  *   splat       Gaussians, initialisation (init), rasterizer (raster), loss, Adam, densify,
  *               training (train), rendering along paths (render), .spz
  *   pipeline    the chain (generate)
+ *   batch       many scenes: manifests, the batch folder and its status files, shards, the
+ *               Slurm job-array script (batch)
  *
  * The plug-in tables every stage takes are in providers.h. Conventions: camera.h (axes,
  * poses, pixel centres) and image.h (layouts, depth in metres with 0 = invalid).
@@ -77,5 +79,7 @@
 #include "gen3d/train.h"
 
 #include "gen3d/generate.h"
+
+#include "gen3d/batch.h"
 
 #endif /* G3D_GEN3D_H */

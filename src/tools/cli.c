@@ -70,9 +70,27 @@ g3d_cancel g3d_cli_cancel(void)
     return (g3d_cancel){stop_requested, NULL};
 }
 
+static char *g_capture;
+static size_t g_capture_n;
+
+void g3d_cli_capture_errors(char *buf, size_t n)
+{
+    g_capture = buf;
+    g_capture_n = n;
+    if (buf && n) buf[0] = 0;
+}
+
 int g3d_cli_errorf(int code, const char *fmt, ...)
 {
     va_list ap;
+    if (g_capture) {
+        if (!g_capture[0] && g_capture_n) {
+            va_start(ap, fmt);
+            vsnprintf(g_capture, g_capture_n, fmt, ap);
+            va_end(ap);
+        }
+        return code;
+    }
     fprintf(stderr, "gen3d: error: ");
     va_start(ap, fmt);
     vfprintf(stderr, fmt, ap);
@@ -101,7 +119,9 @@ static void print_default(const g3d_opt *o, char *buf, size_t n)
     case G3D_OPT_INT: snprintf(buf, n, " (default %d)", *(int *)o->target); break;
     case G3D_OPT_INT64: snprintf(buf, n, " (default %" PRId64 ")", *(int64_t *)o->target); break;
     case G3D_OPT_DOUBLE: snprintf(buf, n, " (default %g)", *(double *)o->target); break;
-    case G3D_OPT_STRING: {
+    case G3D_OPT_STRING:
+    case G3D_OPT_PATH:
+    case G3D_OPT_TRAJECTORY: {
         const char *s = *(const char **)o->target;
         if (s) snprintf(buf, n, " (default %s)", s);
         break;
@@ -135,7 +155,9 @@ static int set_value(const g3d_opt *o, const char *name, const char *val)
     errno = 0;
     switch (o->kind) {
     case G3D_OPT_FLAG: *(int *)o->target = 1; return 0;
-    case G3D_OPT_STRING: *(const char **)o->target = val; return 0;
+    case G3D_OPT_STRING:
+    case G3D_OPT_PATH:
+    case G3D_OPT_TRAJECTORY: *(const char **)o->target = val; return 0;
     case G3D_OPT_INT: {
         long v = strtol(val, &end, 10);
         if (errno || *end || end == val || v < -2147483647L || v > 2147483647L) break;
@@ -207,4 +229,19 @@ int g3d_cli_parse(int argc, char **argv, const g3d_opt *opts, int nopts, const c
         if (rc) return rc;
     }
     return G3D_EXIT_OK;
+}
+
+int g3d_cli_set_option(const g3d_opt *opts, int nopts, const char *name, const char *value)
+{
+    char dashed[96];
+    snprintf(dashed, sizeof dashed, "--%s", name);
+    for (int k = 0; k < nopts; k++) {
+        if (strcmp(opts[k].long_name, name)) continue;
+        if (opts[k].kind == G3D_OPT_FLAG) {
+            *(int *)opts[k].target = strcmp(value, "0") != 0;
+            return G3D_EXIT_OK;
+        }
+        return set_value(&opts[k], dashed, value);
+    }
+    return g3d_cli_errorf(G3D_EXIT_USAGE, "unknown option '%s'", dashed);
 }

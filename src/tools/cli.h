@@ -14,6 +14,7 @@
 
 #include "gen3d/base.h"
 
+#include <stddef.h>
 #include <stdint.h>
 
 enum { G3D_EXIT_OK = 0, G3D_EXIT_FAIL = 1, G3D_EXIT_USAGE = 2, G3D_EXIT_CANCELLED = 130 };
@@ -29,7 +30,9 @@ typedef enum g3d_opt_kind {
     G3D_OPT_INT,     /* int */
     G3D_OPT_INT64,   /* int64_t */
     G3D_OPT_DOUBLE,  /* double */
-    G3D_OPT_STRING   /* const char *, points into argv */
+    G3D_OPT_STRING,  /* const char *, points into argv */
+    G3D_OPT_PATH,    /* a string naming a file or folder (a batch manifest resolves it) */
+    G3D_OPT_TRAJECTORY /* a string: a camera-path preset (trajectory.h) or a camera file */
 } g3d_opt_kind;
 
 typedef struct g3d_opt {
@@ -69,6 +72,16 @@ void g3d_cli_common_apply(g3d_cli_common *c);
  * G3D_EXIT_USAGE after printing one error line. */
 int g3d_cli_parse(int argc, char **argv, const g3d_opt *opts, int nopts, const char *usage,
                   const char *description, const char **pos, int max_pos, int *npos);
+
+/* Sets the option whose long name is `name` from the text `value` as the command line would
+ * ("0" clears a flag, anything else sets it). Returns G3D_EXIT_OK, or G3D_EXIT_USAGE after
+ * reporting an unknown name or a bad value. */
+int g3d_cli_set_option(const g3d_opt *opts, int nopts, const char *name, const char *value);
+
+/* While buf is non-NULL, g3d_cli_errorf keeps its message in buf (the first one since the
+ * call, cleared here) instead of printing it: a caller can check options and word the report
+ * itself. NULL prints again. */
+void g3d_cli_capture_errors(char *buf, size_t n);
 
 /* Prints "gen3d: error: <message>" (the thread's last error) and returns G3D_EXIT_FAIL; for
  * G3D_CANCELLED prints "gen3d: interrupted" and returns G3D_EXIT_CANCELLED. */

@@ -1,6 +1,5 @@
 /* gen3d generate: the options of the whole pipeline, handed to g3d_generate (generate.h). */
-#include "input_opts.h"
-#include "world_opts.h"
+#include "generate_opts.h"
 
 #include <stdint.h>
 #include <stdio.h>
@@ -33,57 +32,27 @@ static const char *description(void)
 
 static int run(int argc, char **argv)
 {
-    g3d_cli_common common;
-    g3d_cli_input in;
-    g3d_cli_world wo;
-    g3d_generate_params p;
-    g3d_generate_params_default(&p);
-    g3d_cli_common_init(&common);
-    g3d_cli_input_init(&in);
-    g3d_cli_world_init(&wo);
-    common.output = "scene";
-    common.seed = (int64_t)p.seed;
-    int iters = (int)p.train.iterations, no_video = !p.video;
-    g3d_opt opts[] = {
-        G3D_INPUT_OPTS(&in),
-        G3D_WORLD_OPTS(&wo),
-        {0, "world", G3D_OPT_STRING, &p.world_dir, "DIR", "train on this world folder instead of generating one"},
-        {0, "iters", G3D_OPT_INT, &iters, "N", "training iterations"},
-        {0, "sh-degree", G3D_OPT_INT, &p.sh_degree, "D", "spherical-harmonics degree of the Gaussians (0..3)"},
-        {0, "video-trajectory", G3D_OPT_STRING, &p.video_trajectory, "NAME", "video camera path: swing (a loop around the input view) or a preset below"},
-        {0, "frames", G3D_OPT_INT, &p.video_frames, "N", "video frames"},
-        {0, "fps", G3D_OPT_INT, &p.video_params.fps, "N", "video frame rate"},
-        {0, "no-video", G3D_OPT_FLAG, &no_video, NULL, "skip the fly-through video"},
-        G3D_COMMON_OPTS(&common),
-    };
+    g3d_cli_generate g;
+    g3d_opt opts[G3D_GENERATE_MAX_OPTS];
+    g3d_cli_generate_init(&g);
+    int nopts = g3d_cli_generate_opts(&g, opts);
     const char *pos[1];
-    int npos, prc = g3d_cli_parse(argc, argv, opts, G3D_COUNTOF(opts), "gen3d generate [-i RGB --depth DEPTH] [options] -o DIR",
+    int npos, prc = g3d_cli_parse(argc, argv, opts, nopts, "gen3d generate [-i RGB --depth DEPTH] [options] -o DIR",
                                   description(), pos, 0, &npos);
     if (prc) return prc < 0 ? G3D_EXIT_OK : prc;
-    if ((prc = g3d_cli_input_check(&in)) != 0) return prc;
-    if ((prc = g3d_cli_world_check(&wo)) != 0) return prc;
-    if (iters < 1 || iters > 1000000) return g3d_cli_errorf(G3D_EXIT_USAGE, "--iters must be in 1..1000000");
-    if (p.sh_degree < 0 || p.sh_degree > 3) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sh-degree must be in 0..3");
-    if (p.video_frames < 2 || p.video_frames > 100000) return g3d_cli_errorf(G3D_EXIT_USAGE, "--frames must be in 2..100000");
-    if (p.video_params.fps < 1 || p.video_params.fps > 240) return g3d_cli_errorf(G3D_EXIT_USAGE, "--fps must be in 1..240");
-    if (p.world_dir && (in.rgb || in.depth_model))
-        return g3d_cli_errorf(G3D_EXIT_USAGE, "--world trains on a generated world: no -i or --depth-model");
-    g3d_cli_common_apply(&common);
-
-    g3d_cli_input_apply(&in, &p);
-    g3d_cli_world_apply(&wo, &p);
-    g3d_train_params_default(&p.train, iters);
-    p.video = !no_video;
-    p.output_dir = common.output;
-    p.seed = (uint64_t)common.seed;
+    if ((prc = g3d_cli_generate_check(&g)) != 0) return prc;
+    g3d_cli_common_apply(&g.common);
+    g3d_cli_generate_apply(&g);
+    g3d_generate_params p = g.p;
     p.progress = g3d_cli_progress();
     p.cancel = g3d_cli_cancel();
+    const int iters = g.iters;
     g3d_generate_result r;
     g3d_status rc = g3d_generate(&p, &r);
     if (rc != G3D_OK) return g3d_cli_fail(rc);
     /* the summary is the command's result, printed even with --quiet */
     const double *s = r.seconds;
-    printf("%s\n", common.output);
+    printf("%s\n", p.output_dir);
     if (!p.world_dir) {
         printf("  input     %6.1f s  %dx%d\n", s[G3D_STAGE_INPUT], r.width, r.height);
         printf("  layers    %6.1f s  %d foreground objects\n", s[G3D_STAGE_LAYERS], r.foreground_objects);

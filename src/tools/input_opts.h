@@ -14,9 +14,9 @@ typedef struct g3d_cli_input {
 } g3d_cli_input;
 
 #define G3D_INPUT_OPTS(in)                                                                                        \
-    {'i', "input", G3D_OPT_STRING, &(in)->rgb, "RGB", "colour image (PNG or JPEG); without it: the default input"}, \
-    {0, "depth", G3D_OPT_STRING, &(in)->depth, "DEPTH", "depth map (.png .pfm .npy .npz)"},                       \
-    {0, "depth-model", G3D_OPT_STRING, &(in)->depth_model, "CKPT", "MoGe-2 or Depth Anything V2 checkpoint: depth of -i without --depth, and of new views"}, \
+    {'i', "input", G3D_OPT_PATH, &(in)->rgb, "RGB", "colour image (PNG or JPEG); without it: the default input"}, \
+    {0, "depth", G3D_OPT_PATH, &(in)->depth, "DEPTH", "depth map (.png .pfm .npy .npz)"},                       \
+    {0, "depth-model", G3D_OPT_PATH, &(in)->depth_model, "CKPT", "MoGe-2 or Depth Anything V2 checkpoint: depth of -i without --depth, and of new views"}, \
     {0, "max-depth", G3D_OPT_DOUBLE, &(in)->max_depth, "M", "metric Depth Anything V2: its maximum depth (0: 20 or 80 from the file name)"}, \
     {0, "depth-tokens", G3D_OPT_INT, &(in)->depth_tokens, "N", "MoGe-2: encoder tokens (0: the model's default; 1200 is about 4x faster)"}, \
     {0, "depth-scale", G3D_OPT_DOUBLE, &(in)->scale, "S", "16-bit PNG / integer depth units per metre (1000 mm, 5000 TUM)"}, \
@@ -25,7 +25,7 @@ typedef struct g3d_cli_input {
     {0, "cx", G3D_OPT_DOUBLE, &(in)->cx, "PX", "principal point x (default: image centre)"},                       \
     {0, "cy", G3D_OPT_DOUBLE, &(in)->cy, "PX", "principal point y (default: image centre)"},                       \
     {0, "fov", G3D_OPT_DOUBLE, &(in)->fov, "DEG", "horizontal field of view instead of --fx (default 60)"},        \
-    {0, "default-input", G3D_OPT_STRING, &(in)->default_dir, "DIR", "folder of the default input (Middlebury Motorcycle)"}
+    {0, "default-input", G3D_OPT_PATH, &(in)->default_dir, "DIR", "folder of the default input (Middlebury Motorcycle)"}
 
 /* The library's defaults (g3d_frame_params_default). */
 void g3d_cli_input_init(g3d_cli_input *in);

@@ -1,0 +1,63 @@
+/* The options of the whole pipeline and their mapping onto g3d_generate_params. */
+#include "generate_opts.h"
+
+#include <string.h>
+
+void g3d_cli_generate_init(g3d_cli_generate *g)
+{
+    memset(g, 0, sizeof *g);
+    g3d_generate_params_default(&g->p);
+    g3d_cli_common_init(&g->common);
+    g3d_cli_input_init(&g->in);
+    g3d_cli_world_init(&g->wo);
+    g->common.output = "scene";
+    g->common.seed = (int64_t)g->p.seed;
+    g->iters = (int)g->p.train.iterations;
+    g->no_video = !g->p.video;
+}
+
+int g3d_cli_generate_opts(g3d_cli_generate *g, g3d_opt *out)
+{
+    g3d_generate_params *p = &g->p;
+    const g3d_opt opts[] = {
+        G3D_INPUT_OPTS(&g->in),
+        G3D_WORLD_OPTS(&g->wo),
+        {0, "world", G3D_OPT_PATH, &p->world_dir, "DIR", "train on this world folder instead of generating one"},
+        {0, "iters", G3D_OPT_INT, &g->iters, "N", "training iterations"},
+        {0, "sh-degree", G3D_OPT_INT, &p->sh_degree, "D", "spherical-harmonics degree of the Gaussians (0..3)"},
+        {0, "video-trajectory", G3D_OPT_STRING, &p->video_trajectory, "NAME", "video camera path: swing (a loop around the input view) or a preset below"},
+        {0, "frames", G3D_OPT_INT, &p->video_frames, "N", "video frames"},
+        {0, "fps", G3D_OPT_INT, &p->video_params.fps, "N", "video frame rate"},
+        {0, "no-video", G3D_OPT_FLAG, &g->no_video, NULL, "skip the fly-through video"},
+        G3D_COMMON_OPTS(&g->common),
+    };
+    _Static_assert(sizeof opts / sizeof opts[0] <= G3D_GENERATE_MAX_OPTS, "raise G3D_GENERATE_MAX_OPTS");
+    memcpy(out, opts, sizeof opts);
+    return G3D_COUNTOF(opts);
+}
+
+int g3d_cli_generate_check(const g3d_cli_generate *g)
+{
+    const g3d_generate_params *p = &g->p;
+    int rc;
+    if ((rc = g3d_cli_input_check(&g->in)) != 0) return rc;
+    if ((rc = g3d_cli_world_check(&g->wo)) != 0) return rc;
+    if (g->iters < 1 || g->iters > 1000000) return g3d_cli_errorf(G3D_EXIT_USAGE, "--iters must be in 1..1000000");
+    if (p->sh_degree < 0 || p->sh_degree > 3) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sh-degree must be in 0..3");
+    if (p->video_frames < 2 || p->video_frames > 100000) return g3d_cli_errorf(G3D_EXIT_USAGE, "--frames must be in 2..100000");
+    if (p->video_params.fps < 1 || p->video_params.fps > 240) return g3d_cli_errorf(G3D_EXIT_USAGE, "--fps must be in 1..240");
+    if (p->world_dir && (g->in.rgb || g->in.depth_model))
+        return g3d_cli_errorf(G3D_EXIT_USAGE, "--world trains on a generated world: no -i or --depth-model");
+    return 0;
+}
+
+void g3d_cli_generate_apply(g3d_cli_generate *g)
+{
+    g3d_generate_params *p = &g->p;
+    g3d_cli_input_apply(&g->in, p);
+    g3d_cli_world_apply(&g->wo, p);
+    g3d_train_params_default(&p->train, g->iters);
+    p->video = !g->no_video;
+    p->output_dir = g->common.output;
+    p->seed = (uint64_t)g->common.seed;
+}
