@@ -5,6 +5,7 @@
 #include "golden.h"
 
 #include "gen3d/depth_anything.h"
+#include "gen3d/recognize.h"
 
 #define GOLDEN "golden/depth_anything_v2_vits/"
 

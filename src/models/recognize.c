@@ -4,11 +4,20 @@
 #include <cjson/cJSON.h>
 #include <stdio.h>
 
+/* Where LaMa's generator layers start ("generator.model." or "model."), or NULL. */
+static const char *lama_prefix(const g3d_ckpt *ck)
+{
+    if (g3d_ckpt_find(ck, "generator.model.1.ffc.convl2l.weight")) return "generator.model.";
+    if (g3d_ckpt_find(ck, "model.1.ffc.convl2l.weight")) return "model.";
+    return NULL;
+}
+
 g3d_model_kind g3d_model_recognize(const g3d_ckpt *ck)
 {
     if (cJSON_IsObject(cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "model_config"))) return G3D_MODEL_MOGE;
     if (g3d_ckpt_find(ck, "pretrained.blocks.0.attn.qkv.weight") && g3d_ckpt_find(ck, "depth_head.scratch.output_conv2.2.weight"))
         return G3D_MODEL_DEPTH_ANYTHING_V2;
+    if (lama_prefix(ck)) return G3D_MODEL_LAMA;
     return G3D_MODEL_UNKNOWN;
 }
 
@@ -82,6 +91,26 @@ const char *g3d_model_describe(const g3d_ckpt *ck, char *buf, size_t n)
                  blocks, (long long)mq->shape[1], (long long)mq->shape[1] / 64, g3d_ckpt_find(ck, "normal_head.input_blocks.0.weight") ? ", normal" : "",
                  g3d_ckpt_find(ck, "mask_head.input_blocks.0.weight") ? ", mask" : "",
                  g3d_ckpt_find(ck, "scale_head.0.weight") ? ", metric scale" : "");
+        return buf;
+    }
+    /* LaMa: residual blocks are the layers with a conv1; widths from their BatchNorms */
+    const char *lp = lama_prefix(ck);
+    if (lp) {
+        char name[128];
+        int blocks = 0;
+        long long local = 0, global = 0;
+        for (int i = 2; i < 256; i++) {
+            snprintf(name, sizeof name, "%s%d.conv1.bn_l.weight", lp, i);
+            long long l = dim0(ck, name);
+            snprintf(name, sizeof name, "%s%d.conv1.bn_g.weight", lp, i);
+            long long g = dim0(ck, name);
+            if (!l && !g) continue;
+            if (!blocks) local = l, global = g;
+            blocks++;
+        }
+        snprintf(name, sizeof name, "%s1.bn_l.weight", lp);
+        snprintf(buf, n, "LaMa (FFC ResNet generator, width %lld, %d residual blocks, %lld of %lld channels global)",
+                 dim0(ck, name), blocks, global, local + global);
         return buf;
     }
     return NULL;
