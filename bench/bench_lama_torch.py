@@ -4,7 +4,7 @@
 # for the C side to load, then timed one forward per request so that the two alternate.
 #   /usr/bin/python3 bench/bench_lama_torch.py CHECKOUT SAVE_PATH [size=512] [threads=2]
 # Prints "ready" once SAVE_PATH is written; then for every line read from stdin runs one
-# size x size forward and prints "torch_seconds <s>".
+# size x size forward and prints "torch_seconds <wall s> <CPU s of all threads>".
 import os
 import sys
 import time
@@ -32,6 +32,6 @@ x[:, 3] = (x[:, 3] > 0.5).float()
 print("ready", flush=True)
 with torch.no_grad():
     for line in sys.stdin:
-        t0 = time.time()
+        t0, c0 = time.time(), time.process_time()
         net(x)
-        print("torch_seconds %.4f" % (time.time() - t0), flush=True)
+        print("torch_seconds %.4f %.4f" % (time.time() - t0, time.process_time() - c0), flush=True)

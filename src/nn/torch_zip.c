@@ -138,7 +138,7 @@ static const struct { const char *module, *name; gkind kind; g3d_dtype dtype; } 
 static const char *const g_refused_modules[] = {"os", "posix", "nt", "sys", "subprocess", "shutil", "importlib",
                                                 "runpy", "code", "codeop", "ctypes", "socket", "pickle", "_pickle",
                                                 "marshal", "pty", "webbrowser", "io", "_io", "tempfile", "signal",
-                                                "multiprocessing", "threading", "asyncio", "pathlib", "glob",
+                                                "multiprocessing", "threading", "asyncio", "glob",
                                                 "builtins", "__builtin__", "torch"};
 /* Builtin types whose instances are plain data. */
 static const char *const g_builtin_types[] = {"set", "frozenset", "bytearray", "bytes", "complex", "slice", "range",
