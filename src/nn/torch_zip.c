@@ -186,13 +186,18 @@ static int carries_tensor(unpickler *u, const value *v, int depth)
     return 0;
 }
 
-/* An instance of the opaque class `cls`, built from `data` (arguments or state) that must
- * carry no tensor: a tensor inside an object the reader does not know could not be named. */
+/* A tensor inside an object the reader does not know could not be named. */
+static g3d_status tensor_in_opaque(const unpickler *u, const value *cls)
+{
+    return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: data.pkl keeps tensors inside a '%s' object (or nests too deeply); "
+                   "only tensors in plain containers are loaded", u->label, cls->s);
+}
+
+/* An instance of the opaque class `cls`, built from `data` (arguments or state, NULL for none)
+ * that must carry no tensor. */
 static g3d_status make_opaque(unpickler *u, const value *cls, const value *data, value **out)
 {
-    if (data && carries_tensor(u, data, 0))
-        return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: data.pkl keeps tensors inside a '%s' object (or nests too deeply); "
-                       "only tensors in plain containers are loaded", u->label, cls->s);
+    if (data && carries_tensor(u, data, 0)) return tensor_in_opaque(u, cls);
     value *r = new_value(u, V_OPAQUE);
     size_t n = strlen(cls->s) + 1;
     if (!r || !(r->s = malloc(n))) return G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", u->label);
@@ -260,8 +265,8 @@ static g3d_status newobj(unpickler *u, value *cls, value *args, value *kwargs)
     if (cls->i == G_ORDERED_DICT) {
         r = new_value(u, V_DICT);
     } else if (cls->i == G_OPAQUE) {
+        if (kwargs && carries_tensor(u, kwargs, 0)) return tensor_in_opaque(u, cls);
         G3D_TRY(make_opaque(u, cls, args, &r));
-        if (kwargs && carries_tensor(u, kwargs, 0)) return make_opaque(u, cls, kwargs, &r);
     } else {
         return cls->i == G_REFUSED ? refuse_global(u, cls) : G3D_ERR(G3D_ERR_FORMAT, "%s: data.pkl: '%s' is not a class", u->label, cls->s);
     }
@@ -370,7 +375,7 @@ static g3d_status run_pickle(unpickler *u, value **result)
                 if (u->stack[k]->kind == V_MARK) return G3D_ERR(G3D_ERR_FORMAT, "%s: data.pkl: misplaced mark", u->label);
                 /* a dict or list subclass the reader does not know: its items are dropped */
                 if (c->kind == V_OPAQUE) {
-                    if (carries_tensor(u, u->stack[k], 0)) return make_opaque(u, c, u->stack[k], &v);
+                    if (carries_tensor(u, u->stack[k], 0)) return tensor_in_opaque(u, c);
                 } else if (!append_item(c, u->stack[k])) {
                     return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
                 }
@@ -442,7 +447,7 @@ static g3d_status run_pickle(unpickler *u, value **result)
             if (u->sp < 1 || (u->stack[u->sp - 1]->kind != V_DICT && u->stack[u->sp - 1]->kind != V_OPAQUE))
                 return G3D_ERR(G3D_ERR_FORMAT, "%s: data.pkl: state for an unsupported object", u->label);
             if (u->stack[u->sp - 1]->kind == V_OPAQUE && carries_tensor(u, b, 0))
-                return make_opaque(u, u->stack[u->sp - 1], b, &v);
+                return tensor_in_opaque(u, u->stack[u->sp - 1]);
             break;
         case 'Q': { /* BINPERSID: ('storage', storage type, key, location, numel) */
             POP(a);
