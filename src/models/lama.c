@@ -4,8 +4,8 @@
  * Every FFC layer keeps its channels as one map [local; global]. The two convolutions feeding
  * the local output (local->local and global->local) sum before the same BatchNorm, so they are
  * one convolution over the whole input with their weights side by side. The global output is
- * the local->global convolution plus the spectral transform, whose last 1x1 convolution takes
- * the other share of the folded BatchNorm. */
+ * the local->global convolution plus the spectral transform: the BatchNorm after their sum is
+ * folded into both (its scale) and into the first (its shift). */
 #include "gen3d/lama.h"
 
 #include "gen3d/nn.h"
