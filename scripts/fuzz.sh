@@ -11,8 +11,8 @@ for t in ckpt pickle zip npy ply; do
     corpus=build-fuzz/corpus-$t
     mkdir -p "$corpus"
     case $t in
-        ckpt) cp tests/fixtures/*.safetensors tests/fixtures/*.pth tests/fixtures/*.pt "$corpus/" ;;
-        pickle) for f in tests/fixtures/state.pth tests/fixtures/ok_handmade.pth tests/fixtures/ckpt_nested.pt tests/fixtures/ckpt_lists.pt; do unzip -p "$f" '*/data.pkl' >"$corpus/$(basename "$f").pkl"; done ;;
+        ckpt) cp tests/fixtures/*.safetensors tests/fixtures/*.pth tests/fixtures/*.pt tests/fixtures/*.ckpt "$corpus/" ;;
+        pickle) for f in tests/fixtures/state.pth tests/fixtures/ok_handmade.pth tests/fixtures/ckpt_nested.pt tests/fixtures/ckpt_lists.pt tests/fixtures/lama_tiny.ckpt; do unzip -p "$f" '*/data.pkl' >"$corpus/$(basename "$f").pkl"; done ;;
         zip) cp tests/fixtures/*.npz "$corpus/" ;;
         npy) for f in tests/fixtures/*.npz; do unzip -o -q -d "$corpus" "$f"; done ;;
         ply) printf 'ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n' >"$corpus/seed.ply" ;;

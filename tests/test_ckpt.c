@@ -1,4 +1,5 @@
 /* Checkpoints: the safetensors reader on the golden weights, every dtype, hostile headers. */
+#include "golden.h"
 #include "testutil.h"
 #include "gen3d/ckpt.h"
 #include "gen3d/recognize.h"
@@ -252,6 +253,51 @@ TEST(hostile_pickles)
     CHECK_FAILS(g3d_ckpt_open(FIXDIR "resize_ref.npz", &ck));
 }
 
+/* A PyTorch Lightning checkpoint (tests/fixtures/make_lama_golden.py): classes and config
+ * objects beside the tensors become names, the state dict keeps its keys, and tensors kept in
+ * callbacks and optimizer states load under their paths. */
+TEST(lightning_checkpoint)
+{
+    g3d_ckpt *ck = NULL;
+    CHECK_OK(g3d_ckpt_open(FIXDIR "lama_tiny.ckpt", &ck));
+    if (!ck) return;
+    const g3d_tensor_info *w = g3d_ckpt_find(ck, "generator.model.1.ffc.convl2l.weight");
+    CHECK(w && w->ndim == 4 && w->shape[0] == 8 && w->shape[1] == 4);
+    CHECK(g3d_ckpt_find(ck, "discriminator.model0.0.weight") != NULL);
+    float v[3];
+    const char *score = "callbacks.pytorch_lightning.callbacks.model_checkpoint.ModelCheckpoint.best_model_score";
+    CHECK_OK(g3d_ckpt_read(ck, score, 0, NULL, v));
+    CHECK(v[0] == 0.875f);
+    CHECK_OK(g3d_ckpt_read(ck, "optimizer_states.0.state.0.exp_avg", 0, NULL, v));
+    const cJSON *meta = g3d_ckpt_meta(ck);
+    const cJSON *cb = cJSON_GetObjectItemCaseSensitive(meta, "callbacks");
+    const cJSON *mc = cJSON_GetObjectItemCaseSensitive(cb, "pytorch_lightning.callbacks.model_checkpoint.ModelCheckpoint");
+    CHECK(cJSON_IsString(cJSON_GetObjectItemCaseSensitive(mc, "monitor")));
+    /* a dict subclass holding a configuration object: kept by its class name */
+    const cJSON *hp = cJSON_GetObjectItemCaseSensitive(meta, "hyper_parameters");
+    CHECK(cJSON_IsString(hp) && !strcmp(hp->valuestring, "pytorch_lightning.utilities.parsing.AttributeDict"));
+    CHECK(cJSON_GetObjectItemCaseSensitive(meta, "global_step")->valuedouble == 1200);
+    g3d_ckpt_free(ck);
+
+    /* Edited copies: a call into a module that reaches the system, and tensors inside an
+     * object of a class the reader does not know (the state dict's OrderedDict renamed). */
+    size_t n = 0;
+    unsigned char *file = NULL;
+    CHECK_OK(g3d_read_file(FIXDIR "lama_tiny.ckpt", (size_t)1 << 24, &file, &n));
+    if (!file) return;
+    const char *edits[][3] = {{"omegaconf.dictconfig", "subprocess.dictconfi", "subprocess.dictconfi.DictConfig"},
+                              {"collections\nOrderedDict", "collectionz\nOrderedDict", "inside a 'collectionz.OrderedDict'"}};
+    for (int k = 0; k < 2; k++) {
+        unsigned char *z = golden_edit_pickle(file, n, edits[k][0], edits[k][1]);
+        if (!z) continue;
+        ck = NULL;
+        CHECK_FAILS(g3d_ckpt_open_memory(z, n, "edited.ckpt", &ck));
+        CHECK(ck == NULL);
+        CHECK_MSG(strstr(g3d_error_message(), edits[k][2]) != NULL, "message does not name %s", edits[k][2]);
+        free(z);
+    }
+    free(file);
+}
 
 /* Checkpoints written by torch.save (tests/fixtures/make_ckpt_fixtures.py). */
 TEST(torch_save_fixtures)
@@ -362,6 +408,7 @@ int main(int argc, char **argv)
     RUN(pytorch_zip);
     RUN(hostile_pickles);
     RUN(torch_save_fixtures);
+    RUN(lightning_checkpoint);
     RUN(write_round_trip);
     return test_summary();
 }

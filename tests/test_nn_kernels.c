@@ -193,6 +193,11 @@ TEST(conv_against_reference)
         {16, 18, 3, 1, 1, 1, 1, 3, 3, 0, 0, G3D_PAD_REFLECT},
         {20, 40, 3, 1, 0, 1, 1, 10, 13, 0, 0, G3D_PAD_ZEROS},
         {17, 20, 3, 1, 2, 1, 1, 70, 9, 0, 0, G3D_PAD_REPLICATE},
+        /* few output channels, large kernel: one row per (channel, tap) */
+        {24, 3, 7, 1, 3, 1, 1, 19, 23, 0, 0, G3D_PAD_REFLECT},
+        {16, 1, 5, 1, 2, 1, 1, 6, 40, 0, 0, G3D_PAD_ZEROS},
+        {16, 4, 5, 1, 1, 1, 1, 9, 8, 0, 0, G3D_PAD_REPLICATE},
+        {16, 4, 7, 1, 3, 1, 1, 6, 2000, 0, 0, G3D_PAD_REFLECT}, /* bands of 4 and 2 rows */
     };
     const int n = (int)(sizeof cases / sizeof *cases);
     for (int i = 0; i < n; i++) {
@@ -202,7 +207,9 @@ TEST(conv_against_reference)
     /* epilogues, 16-bit weights */
     for (int i = 0; i < n; i++) {
         const conv_case *cc = &cases[i];
-        float *g = rnd(cc->cout, 50 + i, 1), *res = rnd((size_t)cc->cout * 2000, 60 + i, 1);
+        /* room for any output: up to 16x the input with a transposed stride of 4 */
+        const size_t nres = (size_t)cc->cout * (cc->h * cc->w * 16 > 2000 ? cc->h * cc->w * 16 : 2000);
+        float *g = rnd(cc->cout, 50 + i, 1), *res = rnd(nres, 60 + i, 1);
         g3d_nn_epi e = {.act = (g3d_act)(1 + i % 7), .scale = g, .res = res};
         check_conv(cc, G3D_DT_F32, &e, 30 + i, i % 2);
         check_conv(cc, i % 2 ? G3D_DT_F16 : G3D_DT_BF16, i % 3 ? &e : NULL, 40 + i, i % 3 == 1);

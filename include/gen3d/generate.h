@@ -24,7 +24,8 @@
  * PLUG-INS
  *   The inpainter, depth estimator and mask provider (providers.h) are either passed in (the
  *   caller keeps ownership; e.g. a diffusion inpainter or a segmentation model) or, when NULL,
- *   made by the run from the parameters and released at its end: the classical inpainter,
+ *   made by the run from the parameters and released at its end: LaMa from `lama_model` or
+ *   else the classical inpainter,
  *   the depth model in `depth_model` or else depth completion, the weight-free region
  *   proposals (regions.h). A plug-in's own parameters go to its create function.
  *
@@ -72,10 +73,12 @@ typedef struct g3d_generate_params {
     const char *world_dir;            /* start from a saved world folder (g3d_world_load; any
                                          dataset folder): input, layers and world are skipped */
     /* ---- plug-ins: NULL = made by the run ---- */
-    const g3d_inpainter *inpainter;       /* NULL: the classical PatchMatch inpainter */
+    const g3d_inpainter *inpainter;       /* NULL: LaMa when lama_model is given, else the
+                                             classical PatchMatch inpainter */
     const g3d_depth_estimator *depth;     /* NULL: depth_model when given, else depth completion */
     const g3d_mask_provider *masks;       /* NULL: weight-free region proposals */
     const char *depth_model;              /* checkpoint for the depth estimator (recognize.h) */
+    const char *lama_model;               /* LaMa checkpoint for the inpainter (lama.h) */
     g3d_depth_model_params depth_model_params;
     /* ---- layers ---- */
     int layers;                       /* 1: split foreground and background (default) */

@@ -2,9 +2,10 @@
  * candidate masks and prompts. Each is a small table of function pointers with a `ctx`.
  *
  * The world loop only sees these tables. Implementations: classical weight-free ones
- * (src/classic), and neural ones (src/models), chosen once per run (g3d_generate, generate.h)
- * from its parameters or passed in by the caller. Every implementation is deterministic for a
- * given seed.
+ * (src/classic: inpaint_classic.h, depth_complete.h, regions.h), and neural ones (src/models:
+ * g3d_inpainter_lama_create in lama.h, depth_estimators.h), chosen once per run (g3d_generate,
+ * generate.h) from its parameters or passed in by the caller. Every implementation is
+ * deterministic for a given seed.
  *
  * LIFETIME
  *   An implementation is made by g3d_<kind>_<impl>_create(..., &table) (e.g.

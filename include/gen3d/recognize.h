@@ -20,6 +20,8 @@ typedef enum g3d_model_kind {
                                     generation: its loader says what it cannot handle) */
     G3D_MODEL_CLIP_TEXT,         /* a CLIP text tower (clip_text.h), alone or inside a Stable
                                     Diffusion checkpoint (cond_stage_model.*) */
+    G3D_MODEL_LAMA,              /* LaMa's FFC generator under "generator.model." (a Lightning
+                                    checkpoint) or "model." (the generator alone) */
     G3D_MODEL_KIND_COUNT
 } g3d_model_kind;
 
@@ -32,7 +34,8 @@ g3d_model_kind g3d_model_recognize_file(const char *path);
 
 /* A one-line description of the architecture, e.g. "Depth Anything V2 (vits: ViT-S/14, 12
  * blocks, width 384)" or "MoGe-2 (dinov2_vits14, 12 blocks, width 384; heads: points, normal,
- * mask, metric scale)", written into buf (n bytes) and returned; NULL when the tensors are not
+ * mask, metric scale)" or "LaMa (FFC ResNet generator, width 64, 18 residual blocks, 384 of
+ * 512 channels global)", written into buf (n bytes) and returned; NULL when the tensors are not
  * those of a supported model. */
 const char *g3d_model_describe(const g3d_ckpt *ck, char *buf, size_t n);
 

@@ -6,6 +6,14 @@
 #include <cjson/cJSON.h>
 #include <stdio.h>
 
+/* Where LaMa's generator layers start ("generator.model." or "model."), or NULL. */
+static const char *lama_prefix(const g3d_ckpt *ck)
+{
+    if (g3d_ckpt_find(ck, "generator.model.1.ffc.convl2l.weight")) return "generator.model.";
+    if (g3d_ckpt_find(ck, "model.1.ffc.convl2l.weight")) return "model.";
+    return NULL;
+}
+
 g3d_model_kind g3d_model_recognize(const g3d_ckpt *ck)
 {
     if (cJSON_IsObject(cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "model_config"))) return G3D_MODEL_MOGE;
@@ -14,6 +22,7 @@ g3d_model_kind g3d_model_recognize(const g3d_ckpt *ck)
     g3d_clip_text_config clip;
     if (g3d_clip_text_probe(ck, NULL, &clip) == G3D_OK) return G3D_MODEL_CLIP_TEXT;
     g3d_error_clear();
+    if (lama_prefix(ck)) return G3D_MODEL_LAMA;
     return G3D_MODEL_UNKNOWN;
 }
 
@@ -93,5 +102,25 @@ const char *g3d_model_describe(const g3d_ckpt *ck, char *buf, size_t n)
     g3d_clip_text_config clip;
     if (g3d_clip_text_probe(ck, NULL, &clip) == G3D_OK) return g3d_clip_text_describe(&clip, buf, n);
     g3d_error_clear();
+    /* LaMa: residual blocks are the layers with a conv1; widths from their BatchNorms */
+    const char *lp = lama_prefix(ck);
+    if (lp) {
+        char name[128];
+        int blocks = 0;
+        long long local = 0, global = 0;
+        for (int i = 2; i < 256; i++) {
+            snprintf(name, sizeof name, "%s%d.conv1.bn_l.weight", lp, i);
+            long long l = dim0(ck, name);
+            snprintf(name, sizeof name, "%s%d.conv1.bn_g.weight", lp, i);
+            long long g = dim0(ck, name);
+            if (!l && !g) continue;
+            if (!blocks) local = l, global = g;
+            blocks++;
+        }
+        snprintf(name, sizeof name, "%s1.bn_l.weight", lp);
+        snprintf(buf, n, "LaMa (FFC ResNet generator, width %lld, %d residual blocks, %lld of %lld channels global)",
+                 dim0(ck, name), blocks, global, local + global);
+        return buf;
+    }
     return NULL;
 }

@@ -274,6 +274,72 @@ static g3d_status convt_forward(const g3d_nn_conv *c, const convt_prep *p, const
 }
 
 /* ---- forward ----------------------------------------------------------------------------- */
+/* ---- few output channels, large kernel -------------------------------------------------------- */
+/* With a handful of output channels and a large kernel (LaMa's 7x7 64->3 output layer) the
+ * product would have only cout rows: mostly padding of the kernel's row tile, and every input
+ * value gathered into a panel would serve only those rows. Instead every (channel, tap) pair
+ * becomes a row: Z [cout*kk, rows*wp] = W' [cout*kk, cin] P [cin, rows*wp] over a band of the
+ * padded input, and each output adds up its kk shifted taps in a fixed order. */
+#define TAP_Z_FLOATS ((size_t)4 << 20) /* Z per band: 16 MB */
+
+static int tapwise_eligible(const g3d_nn_conv *c)
+{
+    return !c->transposed && one(c->groups) == 1 && one(c->stride) == 1 && one(c->dilation) == 1 && c->cout <= 4 &&
+           c->kh * c->kw >= 25 && c->cin >= 16;
+}
+
+static float wval(const g3d_nn_conv *c, size_t i);
+
+static g3d_status tapwise(const g3d_nn_conv *c, const float *x, int h, int w, int ho, int wo, float *y,
+                          const g3d_nn_epi *epi)
+{
+    const int kk = c->kh * c->kw, rz = c->cout * kk, wp = w + 2 * c->pad_w, halo = c->kh - 1;
+    long rows = (long)(TAP_Z_FLOATS / ((size_t)rz * wp));
+    int band = rows - halo < 1 ? 1 : rows - halo > ho ? ho : (int)(rows - halo);
+    const size_t zn = (size_t)(band + halo) * wp;
+    float *wt = malloc(sizeof(float) * (size_t)rz * c->cin), *P = malloc(sizeof(float) * (size_t)c->cin * zn);
+    float *Z = malloc(sizeof(float) * (size_t)rz * zn), *S = malloc(sizeof(float) * (size_t)c->cout * band * wo);
+    g3d_status rc = wt && P && Z && S ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "conv: out of memory");
+    if (rc == G3D_OK)
+        for (int o = 0; o < c->cout; o++)
+            for (int t = 0; t < kk; t++)
+                for (int ci = 0; ci < c->cin; ci++) wt[((size_t)o * kk + t) * c->cin + ci] = wval(c, ((size_t)o * c->cin + ci) * kk + t);
+    const size_t plane = (size_t)ho * wo;
+    for (int oy0 = 0; oy0 < ho && rc == G3D_OK; oy0 += band) {
+        const int nb = ho - oy0 < band ? ho - oy0 : band, nrow = nb + halo;
+        /* input rows a..b of the padded map, the part inside the image padded by g3d_nn_pad2d */
+        const int a = oy0 - c->pad_h, b = a + nrow - 1, a1 = a < 0 ? 0 : a, b1 = b > h - 1 ? h - 1 : b;
+        for (int ci = 0; ci < c->cin && rc == G3D_OK; ci++)
+            rc = g3d_nn_pad2d(x + ((size_t)ci * h + a1) * w, 1, b1 - a1 + 1, w, a1 - a, b - b1, c->pad_w, c->pad_w,
+                              c->pad_mode, P + (size_t)ci * nrow * wp);
+        if (rc != G3D_OK) break;
+        const long n = (long)nrow * wp;
+        nn_gemm m = {.M = rz, .N = (int)n, .K = c->cin, .a = wt, .lda = c->cin, .ka = 1, .bkind = NN_B_ROWS, .b = P,
+                     .ldb = n, .y = Z, .ldy = n, .alpha = 1.0f, .chan_rows = 1};
+        if ((rc = nn_gemm_run(&m)) != G3D_OK) break;
+        const int nr = c->cout * nb;
+#pragma omp parallel for schedule(static) if (!omp_in_parallel())
+        for (int i = 0; i < nr; i++) {
+            const int o = i / nb, r = i % nb;
+            float *s = S + (size_t)i * wo;
+            const float bias = c->b ? c->b[o] : 0.0f;
+            for (int ox = 0; ox < wo; ox++) s[ox] = bias;
+            for (int ky = 0; ky < c->kh; ky++)
+                for (int kx = 0; kx < c->kw; kx++) {
+                    const float *z = Z + ((size_t)o * kk + ky * c->kw + kx) * n + (size_t)(r + ky) * wp + kx;
+                    for (int ox = 0; ox < wo; ox++) s[ox] += z[ox];
+                }
+            if (epi && epi->act != G3D_ACT_NONE) nn_act(epi->act, s, wo);
+            float *yr = y + o * plane + (size_t)(oy0 + r) * wo;
+            const float *res = epi && epi->res ? epi->res + o * plane + (size_t)(oy0 + r) * wo : NULL;
+            const float sc = epi && epi->scale ? epi->scale[o] : 1.0f;
+            for (int ox = 0; ox < wo; ox++) yr[ox] = (res ? res[ox] : 0.0f) + sc * s[ox];
+        }
+    }
+    free(wt), free(P), free(Z), free(S);
+    return rc;
+}
+
 g3d_status g3d_nn_conv_forward(const g3d_nn_conv *c, const float *x, int h, int w, float *y, const g3d_nn_epi *epi)
 {
     int ho, wo;
@@ -287,6 +353,7 @@ g3d_status g3d_nn_conv_forward(const g3d_nn_conv *c, const float *x, int h, int 
         return rc;
     }
     if (c->prep) return nn_wino_forward(c, c->prep, x, h, w, ho, wo, y, epi);
+    if (tapwise_eligible(c)) return tapwise(c, x, h, w, ho, wo, y, epi);
     const int G = one(c->groups), s = one(c->stride), d = one(c->dilation);
     if (G > 1 && G == c->cin && G == c->cout) return depthwise(c, x, h, w, ho, wo, y, epi);
     const int cg = c->cin / G, og = c->cout / G, K = cg * c->kh * c->kw, kk = c->kh * c->kw;

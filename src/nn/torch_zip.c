@@ -1,7 +1,9 @@
 /* PyTorch zip checkpoints (torch.save since 1.6): <archive>/data.pkl, a pickle of the saved
  * object whose tensors refer to raw storages <archive>/data/<key>. The pickle is read by a
- * restricted machine that knows only the opcodes torch.save emits and only the globals needed
- * to rebuild tensors and ordered dicts; anything else is refused, and nothing is executed. */
+ * restricted machine that knows only the opcodes torch.save emits and rebuilds only tensors,
+ * plain containers and ordered dicts; nothing is ever executed. Other classes (a training
+ * framework's callbacks, configuration objects) become opaque placeholders, provided they hold
+ * no tensors; calls into modules that reach the system are refused outright. */
 #include "ckpt_int.h"
 #include "gen3d/zip.h"
 
@@ -13,17 +15,19 @@
 #define MAX_PICKLE_BYTES ((uint64_t)256 << 20)
 #define MAX_VALUES 50000000
 
-typedef enum { V_NONE, V_BOOL, V_INT, V_FLOAT, V_STR, V_TUPLE, V_LIST, V_DICT, V_GLOBAL, V_STORAGE, V_TENSOR, V_MARK } vkind;
+/* V_OPAQUE: an instance of a class the reader does not know, kept only by its name. */
+typedef enum { V_NONE, V_BOOL, V_INT, V_FLOAT, V_STR, V_TUPLE, V_LIST, V_DICT, V_GLOBAL, V_STORAGE, V_TENSOR, V_OPAQUE, V_MARK } vkind;
 
-/* Callable globals we accept. */
-typedef enum { G_ORDERED_DICT, G_REBUILD_TENSOR, G_REBUILD_PARAMETER, G_STORAGE } gkind;
+/* Globals: the ones rebuilt, any other class (instances become V_OPAQUE), and callables that
+ * are refused when called (modules that reach the file system, processes or the interpreter). */
+typedef enum { G_ORDERED_DICT, G_REBUILD_TENSOR, G_REBUILD_PARAMETER, G_STORAGE, G_OPAQUE, G_REFUSED } gkind;
 
 typedef struct value value;
 struct value {
     vkind kind;
     int64_t i;            /* int, bool; global: gkind; storage: numel */
     double f;
-    char *s;              /* str; storage: key */
+    char *s;              /* str; storage: key; global, opaque: "module.name" */
     value **items;        /* tuple/list items; dict: key, value pairs */
     int64_t n, cap;
     g3d_dtype dtype;      /* global storage type, storage, tensor */
@@ -40,6 +44,7 @@ typedef struct unpickler {
     int64_t memo_cap;
     value **all;          /* every value allocated, for freeing */
     int64_t nall, all_cap;
+    int64_t scan_left;    /* values that tensor checks of opaque objects may still visit */
 } unpickler;
 
 static value *new_value(unpickler *u, vkind k)
@@ -127,17 +132,84 @@ static const struct { const char *module, *name; gkind kind; g3d_dtype dtype; } 
     {"torch", "BoolStorage", G_STORAGE, G3D_DT_BOOL},
 };
 
+/* Modules whose callables act on the system or the interpreter, and torch itself (a torch call
+ * other than those above would rebuild a tensor this reader cannot place). Nothing is ever
+ * called, but a checkpoint that asks for one of these is hostile or unreadable: refused. */
+static const char *const g_refused_modules[] = {"os", "posix", "nt", "sys", "subprocess", "shutil", "importlib",
+                                                "runpy", "code", "codeop", "ctypes", "socket", "pickle", "_pickle",
+                                                "marshal", "pty", "webbrowser", "io", "_io", "tempfile", "signal",
+                                                "multiprocessing", "threading", "asyncio", "glob",
+                                                "builtins", "__builtin__", "torch"};
+/* Builtin types whose instances are plain data. */
+static const char *const g_builtin_types[] = {"set", "frozenset", "bytearray", "bytes", "complex", "slice", "range",
+                                              "object"};
+
+static int refused_call(const char *module, const char *name)
+{
+    size_t top = strcspn(module, ".");
+    int builtin = !strcmp(module, "builtins") || !strcmp(module, "__builtin__");
+    for (size_t k = 0; builtin && k < sizeof g_builtin_types / sizeof *g_builtin_types; k++)
+        if (!strcmp(name, g_builtin_types[k])) return 0;
+    for (size_t k = 0; k < sizeof g_refused_modules / sizeof *g_refused_modules; k++)
+        if (strlen(g_refused_modules[k]) == top && !strncmp(module, g_refused_modules[k], top)) return 1;
+    return 0;
+}
+
+/* Pushes a global. Referring to any global is harmless (it is only a name); what a call of it
+ * gives is decided in reduce() and newobj(). */
 static g3d_status make_global(unpickler *u, const char *module, const char *name)
 {
+    value *v = new_value(u, V_GLOBAL);
+    size_t n = strlen(module) + strlen(name) + 2;
+    if (!v || !(v->s = malloc(n))) return G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", u->label);
+    snprintf(v->s, n, "%s.%s", module, name);
+    v->i = refused_call(module, name) ? G_REFUSED : G_OPAQUE;
     for (size_t k = 0; k < sizeof g_globals / sizeof *g_globals; k++)
         if (!strcmp(module, g_globals[k].module) && !strcmp(name, g_globals[k].name)) {
-            value *v = new_value(u, V_GLOBAL);
-            if (!v) return G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", u->label);
             v->i = g_globals[k].kind;
             v->dtype = g_globals[k].dtype;
-            return push(u, v) ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", u->label);
         }
-    return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: data.pkl uses the global '%s.%s', which a checkpoint reader will not load", u->label, module, name);
+    return push(u, v) ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", u->label);
+}
+
+#define SCAN_MAX_DEPTH 64
+
+/* 1 if v holds a tensor or a storage (or is too deep or too large to tell: the scans of one
+ * pickle share a budget, so that repeated references cannot make them quadratic). */
+static int carries_tensor(unpickler *u, const value *v, int depth)
+{
+    if (depth >= SCAN_MAX_DEPTH || --u->scan_left < 0) return 1;
+    if (v->kind == V_TENSOR || v->kind == V_STORAGE) return 1;
+    if (v->kind == V_DICT || v->kind == V_LIST || v->kind == V_TUPLE)
+        for (int64_t k = 0; k < v->n; k++)
+            if (carries_tensor(u, v->items[k], depth + 1)) return 1;
+    return 0;
+}
+
+/* A tensor inside an object the reader does not know could not be named. */
+static g3d_status tensor_in_opaque(const unpickler *u, const value *cls)
+{
+    return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: data.pkl keeps tensors inside a '%s' object (or nests too deeply); "
+                   "only tensors in plain containers are loaded", u->label, cls->s);
+}
+
+/* An instance of the opaque class `cls`, built from `data` (arguments or state, NULL for none)
+ * that must carry no tensor. */
+static g3d_status make_opaque(unpickler *u, const value *cls, const value *data, value **out)
+{
+    if (data && carries_tensor(u, data, 0)) return tensor_in_opaque(u, cls);
+    value *r = new_value(u, V_OPAQUE);
+    size_t n = strlen(cls->s) + 1;
+    if (!r || !(r->s = malloc(n))) return G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", u->label);
+    memcpy(r->s, cls->s, n);
+    *out = r;
+    return G3D_OK;
+}
+
+static g3d_status refuse_global(const unpickler *u, const value *fn)
+{
+    return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: data.pkl uses the global '%s', which a checkpoint reader will not load",
+                   u->label, fn->s);
 }
 
 static int64_t tuple_int(const value *t, int64_t i, int *ok)
@@ -151,8 +223,11 @@ static g3d_status reduce(unpickler *u, value *fn, value *args)
 {
     if (fn->kind != V_GLOBAL || args->kind != V_TUPLE) return G3D_ERR(G3D_ERR_FORMAT, "%s: data.pkl: malformed call", u->label);
     value *r = NULL;
+    if (fn->i == G_REFUSED) return refuse_global(u, fn);
     if (fn->i == G_ORDERED_DICT) {
         r = new_value(u, V_DICT);
+    } else if (fn->i == G_OPAQUE) {
+        G3D_TRY(make_opaque(u, fn, args, &r));
     } else if (fn->i == G_REBUILD_PARAMETER) {
         if (args->n < 1 || args->items[0]->kind != V_TENSOR) return G3D_ERR(G3D_ERR_FORMAT, "%s: data.pkl: malformed parameter", u->label);
         r = args->items[0];
@@ -176,6 +251,24 @@ static g3d_status reduce(unpickler *u, value *fn, value *args)
         if (!ok) return G3D_ERR(G3D_ERR_FORMAT, "%s: data.pkl: malformed tensor size or stride", u->label);
     } else {
         return G3D_ERR(G3D_ERR_FORMAT, "%s: data.pkl: a storage type cannot be called", u->label);
+    }
+    if (!r || !push(u, r)) return G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", u->label);
+    return G3D_OK;
+}
+
+/* NEWOBJ / NEWOBJ_EX: cls.__new__(cls, *args, **kwargs) (kwargs NULL for NEWOBJ). */
+static g3d_status newobj(unpickler *u, value *cls, value *args, value *kwargs)
+{
+    if (cls->kind != V_GLOBAL || args->kind != V_TUPLE || (kwargs && kwargs->kind != V_DICT))
+        return G3D_ERR(G3D_ERR_FORMAT, "%s: data.pkl: malformed object creation", u->label);
+    value *r = NULL;
+    if (cls->i == G_ORDERED_DICT) {
+        r = new_value(u, V_DICT);
+    } else if (cls->i == G_OPAQUE) {
+        if (kwargs && carries_tensor(u, kwargs, 0)) return tensor_in_opaque(u, cls);
+        G3D_TRY(make_opaque(u, cls, args, &r));
+    } else {
+        return cls->i == G_REFUSED ? refuse_global(u, cls) : G3D_ERR(G3D_ERR_FORMAT, "%s: data.pkl: '%s' is not a class", u->label, cls->s);
     }
     if (!r || !push(u, r)) return G3D_ERR(G3D_ERR_NOMEM, "%s: out of memory", u->label);
     return G3D_OK;
@@ -276,11 +369,16 @@ static g3d_status run_pickle(unpickler *u, value **result)
             }
             value *c = u->stack[target];
             int is_dict = op == 's' || op == 'u';
-            if (c->kind != (is_dict ? V_DICT : V_LIST) || (is_dict && (u->sp - lo) % 2))
+            if ((c->kind != (is_dict ? V_DICT : V_LIST) && c->kind != V_OPAQUE) || (is_dict && (u->sp - lo) % 2))
                 return G3D_ERR(G3D_ERR_FORMAT, "%s: data.pkl: items added to a %s", u->label, is_dict ? "non-dict" : "non-list");
             for (int64_t k = lo; k < u->sp; k++) {
                 if (u->stack[k]->kind == V_MARK) return G3D_ERR(G3D_ERR_FORMAT, "%s: data.pkl: misplaced mark", u->label);
-                if (!append_item(c, u->stack[k])) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+                /* a dict or list subclass the reader does not know: its items are dropped */
+                if (c->kind == V_OPAQUE) {
+                    if (carries_tensor(u, u->stack[k], 0)) return tensor_in_opaque(u, c);
+                } else if (!append_item(c, u->stack[k])) {
+                    return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+                }
             }
             u->sp = target + 1;
             break;
@@ -336,9 +434,20 @@ static g3d_status run_pickle(unpickler *u, value **result)
             if ((rc = make_global(u, a->s, b->s)) != G3D_OK) return rc;
             break;
         case 'R': POP(b); POP(a); if ((rc = reduce(u, a, b)) != G3D_OK) return rc; break;
-        case 'b': /* BUILD: state for an object; our dicts take none that matters (e.g. _metadata) */
+        case 0x81: POP(b); POP(a); if ((rc = newobj(u, a, b, NULL)) != G3D_OK) return rc; break; /* NEWOBJ */
+        case 0x92: { /* NEWOBJ_EX */
+            value *c;
+            POP(c); POP(b); POP(a);
+            if ((rc = newobj(u, a, b, c)) != G3D_OK) return rc;
+            break;
+        }
+        case 'b': /* BUILD: state for an object; our dicts take none that matters (e.g. _metadata),
+                   * an opaque object's is dropped once it is known to hold no tensor */
             POP(b);
-            if (u->sp < 1 || u->stack[u->sp - 1]->kind != V_DICT) return G3D_ERR(G3D_ERR_FORMAT, "%s: data.pkl: state for an unsupported object", u->label);
+            if (u->sp < 1 || (u->stack[u->sp - 1]->kind != V_DICT && u->stack[u->sp - 1]->kind != V_OPAQUE))
+                return G3D_ERR(G3D_ERR_FORMAT, "%s: data.pkl: state for an unsupported object", u->label);
+            if (u->stack[u->sp - 1]->kind == V_OPAQUE && carries_tensor(u, b, 0))
+                return tensor_in_opaque(u, u->stack[u->sp - 1]);
             break;
         case 'Q': { /* BINPERSID: ('storage', storage type, key, location, numel) */
             POP(a);
@@ -453,6 +562,7 @@ static g3d_status walk_children(walk *w, const value *v, const char *path, char 
     case V_INT: *json = cJSON_CreateNumber((double)v->i); break;
     case V_FLOAT: *json = cJSON_CreateNumber(v->f); break;
     case V_STR: *json = cJSON_CreateString(v->s); break;
+    case V_GLOBAL: case V_OPAQUE: *json = cJSON_CreateString(v->s); break; /* by name only */
     case V_TENSOR:
         G3D_TRY(add_tensor(w, path, v));
         *json = cJSON_CreateString(path);
@@ -473,12 +583,13 @@ static g3d_status walk_children(walk *w, const value *v, const char *path, char 
         for (int64_t k = 0; k + 1 < v->n && *json; k += 2) {
             const value *key = v->items[k];
             char kbuf[32];
-            const char *ks = key->kind == V_STR ? key->s : NULL;
+            /* a class as key (a training framework's callbacks) is named by its dotted name */
+            const char *ks = key->kind == V_STR || key->kind == V_GLOBAL || key->kind == V_OPAQUE ? key->s : NULL;
             if (key->kind == V_INT) { snprintf(kbuf, sizeof kbuf, "%lld", (long long)key->i); ks = kbuf; }
             cJSON *c;
             g3d_status rc = G3D_OK;
             if (!ks) {
-                rc = G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: a dict key in data.pkl is neither a string nor an integer", w->ck->path);
+                rc = G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: a dict key in data.pkl is neither a string, an integer nor a class", w->ck->path);
             } else {
                 snprintf(sub, 1024, "%s%s%s", path, *path ? "." : "", ks);
                 rc = walk_value(w, v->items[k + 1], sub, &c);
@@ -536,6 +647,7 @@ g3d_status g3d__torch_index(g3d_ckpt *ck)
     unpickler u;
     memset(&u, 0, sizeof u);
     u.label = ck->path;
+    u.scan_left = (int64_t)1 << 24;
     u.p = buf;
     u.end = buf ? buf + n : buf;
     value *root = NULL;
@@ -543,15 +655,29 @@ g3d_status g3d__torch_index(g3d_ckpt *ck)
     if (rc == G3D_OK) {
         walk w = {ck, &zip, prefix, 0, 0, 0};
         /* {'model': state_dict, ...}: when exactly one top-level entry holds tensors and it is
-         * a dict, tensors are named by their state-dict keys without that wrapper key. */
+         * a dict, tensors are named by their state-dict keys without that wrapper key. A
+         * PyTorch Lightning checkpoint also keeps tensors in its callbacks' and optimizers'
+         * states: there the 'state_dict' entry loses its key and the rest keep their paths. */
         const value *tensors_at = root;
         const char *strip = NULL;
-        int64_t visits = 0;
+        int64_t visits = 0, lightning = -1;
         if (root->kind == V_DICT) {
             int holders = 0;
-            for (int64_t k = 0; k + 1 < root->n; k += 2)
-                if (holds_tensor(root->items[k + 1], 1, &visits)) { holders++; tensors_at = root->items[k + 1]; strip = root->items[k]->kind == V_STR ? root->items[k]->s : NULL; }
-            if (holders != 1 || tensors_at->kind != V_DICT || !strip) { tensors_at = root; strip = NULL; }
+            for (int64_t k = 0; k + 1 < root->n; k += 2) {
+                const value *key = root->items[k], *val = root->items[k + 1];
+                if (!holds_tensor(val, 1, &visits)) continue;
+                holders++;
+                tensors_at = val;
+                strip = key->kind == V_STR ? key->s : NULL;
+                if (key->kind == V_STR && !strcmp(key->s, "state_dict") && val->kind == V_DICT) lightning = k;
+            }
+            if (holders > 1 && lightning >= 0) {
+                tensors_at = root->items[lightning + 1];
+                strip = root->items[lightning]->s;
+            } else if (holders != 1 || tensors_at->kind != V_DICT || !strip) {
+                tensors_at = root;
+                strip = NULL;
+            }
         }
         cJSON *json = NULL;
         if (strip) {

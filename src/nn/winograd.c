@@ -6,7 +6,7 @@
  *   M[xi] = U[xi] V[xi]   (16 products [cout x cin] x [cin x tiles], on the shared kernel)
  *   Y = A^T M A   (the 2x2 outputs)
  *
- * A task is one block of at most 66 output channels and one panel of 64 tiles. For each block
+ * A task is one block of at most 132 output channels and one panel of 64 tiles. For each block
  * of input channels it transforms the patches (16 tiles at a time, vectorised across tiles,
  * from row buffers that already hold the padding) into 16 panels, runs the 16 products into
  * per-task accumulators, and finally transforms back and applies the epilogue. The transforms
@@ -27,7 +27,7 @@ typedef int vi __attribute__((vector_size(64)));
 #define TP 64    /* tiles per task (one panel) */
 #define LDV 80   /* row stride of a transformed panel: 16 spare columns for the last group */
 #define KCW 96   /* input channels per block */
-#define MBW 66   /* output channels per task, at most */
+#define MBW 132   /* output channels per task, at most */
 #define LINE (2 * TP + 48)
 
 static int rup6(int x) { return (x + 5) / 6 * 6; }

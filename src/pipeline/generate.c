@@ -5,6 +5,7 @@
 #include "gen3d/imageio.h"
 #include "gen3d/init.h"
 #include "gen3d/inpaint_classic.h"
+#include "gen3d/lama.h"
 #include "gen3d/ply.h"
 #include "gen3d/raster.h"
 #include "gen3d/regions.h"
@@ -155,9 +156,24 @@ static g3d_status make_depth(run *r)
     return G3D_OK;
 }
 
+/* The inpainter: the caller's, LaMa from p->lama_model, or the classical one. Made before the
+ * input is loaded, so that a bad checkpoint fails before any work. */
+static g3d_status make_inpainter(run *r)
+{
+    const g3d_generate_params *p = r->p;
+    r->inpainter = p->inpainter ? p->inpainter : &r->own_inpainter;
+    if (p->inpainter) return G3D_OK;
+    if (!p->lama_model) return g3d_inpainter_classic_create(NULL, &r->own_inpainter);
+    G3D_TRY(g3d_inpainter_lama_create(p->lama_model, &r->own_inpainter));
+    char desc[256];
+    g3d_log(G3D_LOG_INFO, "inpainter: %s (%s)", p->lama_model, g3d_lama_describe(r->own_inpainter.ctx, desc, sizeof desc));
+    return G3D_OK;
+}
+
 static g3d_status stage_input(run *r)
 {
     const g3d_generate_params *p = r->p;
+    G3D_TRY(make_inpainter(r));
     G3D_TRY(make_depth(r));
     if (p->frame) {
         G3D_TRY(g3d_frame_validate(p->frame, p->frame->name[0] ? p->frame->name : "input frame"));
@@ -178,11 +194,6 @@ static g3d_status stage_input(run *r)
 static g3d_status stage_layers(run *r)
 {
     const g3d_generate_params *p = r->p;
-    r->inpainter = p->inpainter;
-    if (!r->inpainter) {
-        G3D_TRY(g3d_inpainter_classic_create(NULL, &r->own_inpainter));
-        r->inpainter = &r->own_inpainter;
-    }
     if (!p->layers) return G3D_OK;
     r->masks = p->masks;
     if (!r->masks) {
@@ -406,6 +417,7 @@ static cJSON *config_json(const run *r)
         cJSON_AddStringToObject(c, "depth_estimator", r->depth->name);
         if (p->layers) cJSON_AddStringToObject(c, "mask_provider", r->masks->name);
         if (p->depth_model && !p->depth) cJSON_AddStringToObject(c, "depth_model", p->depth_model);
+        if (p->lama_model && !p->inpainter) cJSON_AddStringToObject(c, "lama_model", p->lama_model);
     }
     cJSON_AddNumberToObject(c, "iterations", (double)p->train.iterations);
     cJSON_AddNumberToObject(c, "sh_degree", p->sh_degree);

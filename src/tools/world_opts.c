@@ -11,6 +11,7 @@ void g3d_cli_world_init(g3d_cli_world *w)
     g3d_generate_params_default(&d);
     memset(w, 0, sizeof *w);
     w->trajectory = d.trajectory;
+    w->inpainter = "classic";
     w->extra = d.world.extra_views;
     w->max_side = d.input.max_side;
 }
@@ -21,6 +22,10 @@ int g3d_cli_world_check(const g3d_cli_world *w)
     if (w->extra < 0 || w->extra > 1000) return g3d_cli_errorf(G3D_EXIT_USAGE, "--extra must be in 0..1000");
     if (w->max_side < 16 || w->max_side > G3D_MAX_IMAGE_SIDE)
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--max-side must be in 16..%d", G3D_MAX_IMAGE_SIDE);
+    if (strcmp(w->inpainter, "classic") && strcmp(w->inpainter, "lama"))
+        return g3d_cli_errorf(G3D_EXIT_USAGE, "--inpainter must be classic or lama, not '%s'", w->inpainter);
+    if (!strcmp(w->inpainter, "lama") != (w->lama_model != NULL))
+        return g3d_cli_errorf(G3D_EXIT_USAGE, "--inpainter lama and --lama-model CKPT go together");
     if (w->distance < 0 || fabs(w->angle) > 360)
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--distance must be >= 0 and --angle within a full turn");
     return 0;
@@ -45,4 +50,5 @@ void g3d_cli_world_apply(const g3d_cli_world *w, g3d_generate_params *p)
     p->world.extra_views = w->extra;
     p->input.max_side = w->max_side;
     p->layers = !w->no_layers;
+    p->lama_model = w->lama_model;
 }

@@ -8,6 +8,7 @@
 
 typedef struct g3d_cli_world {
     const char *trajectory;
+    const char *inpainter, *lama_model;
     int steps, extra, max_side, no_layers;
     double angle, distance;
 } g3d_cli_world;
@@ -19,7 +20,9 @@ typedef struct g3d_cli_world {
     {0, "distance", G3D_OPT_DOUBLE, &(w)->distance, "M", "moving presets: distance in metres (0: a quarter of the median depth)"}, \
     {0, "extra", G3D_OPT_INT, &(w)->extra, "M", "extra training views rendered from the final cloud"},               \
     {0, "max-side", G3D_OPT_INT, &(w)->max_side, "PX", "downscale the input so that its longer side is at most this"}, \
-    {0, "no-layers", G3D_OPT_FLAG, &(w)->no_layers, NULL, "skip the foreground/background split"}
+    {0, "no-layers", G3D_OPT_FLAG, &(w)->no_layers, NULL, "skip the foreground/background split"},            \
+    {0, "inpainter", G3D_OPT_STRING, &(w)->inpainter, "NAME", "classic (PatchMatch) or lama (needs --lama-model)"},  \
+    {0, "lama-model", G3D_OPT_PATH, &(w)->lama_model, "CKPT", "LaMa checkpoint (big-lama/models/best.ckpt)"}
 
 /* The library's defaults (g3d_generate_params_default). */
 void g3d_cli_world_init(g3d_cli_world *w);
