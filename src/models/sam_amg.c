@@ -1,0 +1,225 @@
+/* Segment Anything's automatic mask generator (SamAutomaticMaskGenerator with one crop layer):
+ * a grid of foreground points, three masks each, filtered by predicted IoU and stability,
+ * then box non-maximum suppression; and the mask provider built on it. */
+#include "sam_int.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+void g3d_sam_amg_params_default(g3d_sam_amg_params *p)
+{
+    *p = (g3d_sam_amg_params){32, 0.88f, 0.95f, 1.0f, 0.7f, 0};
+}
+
+void g3d_sam_masks_free(g3d_sam_masks *s)
+{
+    if (!s) return;
+    free(s->masks); free(s->iou); free(s->stability); free(s->boxes); free(s->area); free(s->points);
+    memset(s, 0, sizeof *s);
+}
+
+typedef struct cand {
+    uint8_t *mask;
+    float iou, stability, px, py;
+    int box[4], area; /* box: x0, y0, x1, y1 inclusive */
+    int order;
+} cand;
+
+static int by_score(const void *a, const void *b)
+{
+    const cand *x = a, *y = b;
+    if (x->iou != y->iou) return x->iou > y->iou ? -1 : 1;
+    return x->order - y->order;
+}
+
+static float box_iou(const int *a, const int *b)
+{
+    float ix = (float)((a[2] < b[2] ? a[2] : b[2]) - (a[0] > b[0] ? a[0] : b[0]));
+    float iy = (float)((a[3] < b[3] ? a[3] : b[3]) - (a[1] > b[1] ? a[1] : b[1]));
+    float inter = (ix > 0 ? ix : 0) * (iy > 0 ? iy : 0);
+    float aa = (float)(a[2] - a[0]) * (float)(a[3] - a[1]), ab = (float)(b[2] - b[0]) * (float)(b[3] - b[1]);
+    return inter / (aa + ab - inter);
+}
+
+/* Keeps the candidate masks of one prediction that pass the thresholds (appended to *list). */
+static g3d_status collect(const g3d_sam_amg_params *p, const g3d_sam_prediction *pr, float px, float py, cand **list,
+                          int *n, int *cap)
+{
+    const size_t npx = (size_t)pr->w * pr->h;
+    for (int k = 0; k < pr->n; k++) {
+        if (p->pred_iou_thresh > 0 && !(pr->iou[k] > p->pred_iou_thresh)) continue;
+        const float *lg = pr->logits + (size_t)k * npx;
+        long inter = 0, uni = 0;
+        for (size_t i = 0; i < npx; i++) {
+            inter += lg[i] > p->stability_score_offset;
+            uni += lg[i] > -p->stability_score_offset;
+        }
+        float stab = (float)inter / (float)uni;
+        if (p->stability_score_thresh > 0 && !(stab >= p->stability_score_thresh)) continue;
+        if (*n == *cap) {
+            int nc = *cap ? 2 * *cap : 64;
+            cand *l = realloc(*list, sizeof(cand) * (size_t)nc);
+            if (!l) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+            *list = l;
+            *cap = nc;
+        }
+        cand *c = &(*list)[*n];
+        if (!(c->mask = malloc(npx))) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+        int x0 = pr->w, y0 = pr->h, x1 = -1, y1 = -1, area = 0;
+        for (int y = 0; y < pr->h; y++)
+            for (int x = 0; x < pr->w; x++) {
+                int on = lg[(size_t)y * pr->w + x] > 0;
+                c->mask[(size_t)y * pr->w + x] = (uint8_t)on;
+                if (!on) continue;
+                area++;
+                if (x < x0) x0 = x;
+                if (x > x1) x1 = x;
+                if (y < y0) y0 = y;
+                if (y > y1) y1 = y;
+            }
+        if (!area) x0 = y0 = x1 = y1 = 0; /* batched_mask_to_box's empty box */
+        c->box[0] = x0; c->box[1] = y0; c->box[2] = x1; c->box[3] = y1;
+        c->area = area;
+        c->iou = pr->iou[k];
+        c->stability = stab;
+        c->px = px;
+        c->py = py;
+        c->order = (*n)++;
+    }
+    return G3D_OK;
+}
+
+g3d_status g3d_sam_generate(const g3d_sam *m, const g3d_sam_image *img, const g3d_sam_amg_params *params,
+                            g3d_sam_progress progress, void *user, g3d_sam_masks *out)
+{
+    memset(out, 0, sizeof *out);
+    g3d_sam_amg_params p;
+    if (params)
+        p = *params;
+    else
+        g3d_sam_amg_params_default(&p);
+    if (p.points_per_side < 1 || p.points_per_side > 256 || !(p.stability_score_offset >= 0) ||
+        !(p.box_nms_thresh >= 0 && p.box_nms_thresh <= 1))
+        return G3D_ERR(G3D_ERR_ARG, "SAM generator: points per side must be 1..256, the stability offset >= 0 and "
+                                    "the NMS threshold in [0, 1]");
+    if (p.min_mask_region_area > 0)
+        return G3D_ERR(G3D_ERR_UNSUPPORTED, "SAM generator: min_mask_region_area is not supported (use 0)");
+    const int n = p.points_per_side, total = n * n;
+    /* build_point_grid: np.linspace(offset, 1 - offset, n) along each axis, x fastest */
+    double offset = 1.0 / (2 * n), step = n > 1 ? ((1 - offset) - offset) / (n - 1) : 0;
+    double sx = (double)img->in_w / img->w, sy = (double)img->in_h / img->h;
+    cand *list = NULL;
+    int nc = 0, cap = 0, label = 1;
+    g3d_status rc = G3D_OK;
+    for (int k = 0; k < total && rc == G3D_OK; k++) {
+        double gx = k % n == n - 1 ? 1 - offset : offset + (k % n) * step;
+        double gy = k / n == n - 1 ? 1 - offset : offset + (k / n) * step;
+        double px = gx * img->w, py = gy * img->h, pt[2] = {px * sx, py * sy};
+        g3d_sam_prediction pr;
+        rc = sam_predict_scaled(m, img, 1, pt, &label, NULL, NULL, 1, 0, &pr, NULL);
+        if (rc == G3D_OK) rc = collect(&p, &pr, (float)px, (float)py, &list, &nc, &cap);
+        g3d_sam_prediction_free(&pr);
+        if (rc == G3D_OK && progress && progress(user, k + 1, total)) rc = G3D_CANCELLED;
+    }
+    if (rc == G3D_OK && nc) {
+        qsort(list, (size_t)nc, sizeof *list, by_score);
+        int nk = 0;
+        for (int i = 0; i < nc; i++) {
+            int ok = 1;
+            for (int j = 0; j < nk && ok; j++) ok = !(box_iou(list[i].box, list[j].box) > p.box_nms_thresh);
+            if (ok) {
+                cand t = list[nk];
+                list[nk++] = list[i];
+                list[i] = t;
+            }
+        }
+        size_t npx = (size_t)img->w * img->h;
+        out->masks = malloc(npx * nk);
+        out->iou = malloc(sizeof(float) * nk);
+        out->stability = malloc(sizeof(float) * nk);
+        out->boxes = malloc(sizeof(int) * 4 * nk);
+        out->area = malloc(sizeof(int) * nk);
+        out->points = malloc(sizeof(float) * 2 * nk);
+        if (!out->masks || !out->iou || !out->stability || !out->boxes || !out->area || !out->points)
+            rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+        for (int i = 0; i < nk && rc == G3D_OK; i++) {
+            const cand *c = &list[i];
+            memcpy(out->masks + npx * i, c->mask, npx);
+            out->iou[i] = c->iou;
+            out->stability[i] = c->stability;
+            int *b = out->boxes + 4 * i;
+            b[0] = c->box[0]; b[1] = c->box[1]; b[2] = c->box[2] - c->box[0]; b[3] = c->box[3] - c->box[1];
+            out->area[i] = c->area;
+            out->points[2 * i] = c->px;
+            out->points[2 * i + 1] = c->py;
+        }
+        out->n = nk;
+    }
+    for (int i = 0; i < nc; i++) free(list[i].mask);
+    free(list);
+    out->w = img->w;
+    out->h = img->h;
+    if (rc != G3D_OK) g3d_sam_masks_free(out);
+    return rc;
+}
+
+/* ---- mask provider ------------------------------------------------------------------------ */
+
+typedef struct sam_provider {
+    g3d_sam *model;
+    g3d_sam_amg_params params;
+} sam_provider;
+
+static void provider_free(void *ctx)
+{
+    sam_provider *s = ctx;
+    g3d_sam_free(s->model);
+    free(s);
+}
+
+static g3d_status provider_propose(void *ctx, const g3d_image *rgb, const g3d_image *depth, g3d_mask_set *out)
+{
+    (void)depth;
+    sam_provider *s = ctx;
+    memset(out, 0, sizeof *out);
+    uint8_t *px = g3d_sam_rgb8(rgb);
+    if (!px) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    g3d_sam_image img;
+    g3d_sam_masks mk;
+    g3d_status rc = g3d_sam_set_image(s->model, px, rgb->w, rgb->h, &img, NULL);
+    free(px);
+    if (rc != G3D_OK) return rc;
+    rc = g3d_sam_generate(s->model, &img, &s->params, NULL, NULL, &mk);
+    g3d_sam_image_free(&img);
+    if (rc != G3D_OK) return rc;
+    out->n = mk.n;
+    out->w = mk.w;
+    out->h = mk.h;
+    out->masks = mk.masks;
+    out->scores = mk.iou;
+    mk.masks = NULL;
+    mk.iou = NULL;
+    /* the predicted IoU may stray a little outside [0, 1] */
+    for (int i = 0; i < out->n; i++) out->scores[i] = out->scores[i] < 0 ? 0 : out->scores[i] > 1 ? 1 : out->scores[i];
+    g3d_sam_masks_free(&mk);
+    return G3D_OK;
+}
+
+g3d_status g3d_mask_provider_sam_create(const char *path, const g3d_sam_amg_params *params, g3d_mask_provider *out)
+{
+    memset(out, 0, sizeof *out);
+    sam_provider *s = calloc(1, sizeof *s);
+    if (!s) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    if (params)
+        s->params = *params;
+    else
+        g3d_sam_amg_params_default(&s->params);
+    g3d_status rc = g3d_sam_load_file(path, &s->model);
+    if (rc != G3D_OK) {
+        free(s);
+        return rc;
+    }
+    *out = (g3d_mask_provider){"sam", s, provider_propose, provider_free};
+    return G3D_OK;
+}
