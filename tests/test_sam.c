@@ -136,7 +136,7 @@ static void check_generator(const char *prefix, float nms)
     p.stability_score_thresh = 0.15f;
     p.box_nms_thresh = nms;
     g3d_sam_masks mk;
-    CHECK_OK(g3d_sam_generate(model, &image, &p, NULL, NULL, &mk));
+    CHECK_OK(g3d_sam_generate(model, &image, &p, NULL, &mk));
     char key[64];
     snprintf(key, sizeof key, "%s.masks", prefix);
     const g3d_tensor_info *t = g3d_ckpt_find(act, key);
@@ -180,7 +180,7 @@ TEST(generator)
     g3d_sam_amg_params_default(&p);
     p.points_per_side = 0;
     g3d_sam_masks mk;
-    CHECK_FAILS(g3d_sam_generate(model, &image, &p, NULL, NULL, &mk));
+    CHECK_FAILS(g3d_sam_generate(model, &image, &p, NULL, &mk));
 }
 
 /* PIL's bilinear resize, which the preprocessing uses, on the recorded picture. */

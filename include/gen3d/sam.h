@@ -124,14 +124,11 @@ typedef struct g3d_sam_masks {
 } g3d_sam_masks;
 void g3d_sam_masks_free(g3d_sam_masks *s);
 
-/* Progress: called after each grid point with (done, total); non-zero stops (G3D_CANCELLED). */
-typedef int (*g3d_sam_progress)(void *user, int done, int total);
-
 /* The masks of img (already encoded), ordered by decreasing predicted IoU (the official order).
- * NULL params: the defaults. Errors: G3D_ERR_ARG for parameters out of range, G3D_ERR_NOMEM,
+ * NULL params: the defaults. progress (may be NULL) hears of each grid point, stage "masks". Errors: G3D_ERR_ARG for parameters out of range, G3D_ERR_NOMEM,
  * G3D_CANCELLED. Free with g3d_sam_masks_free. */
 g3d_status g3d_sam_generate(const g3d_sam *m, const g3d_sam_image *img, const g3d_sam_amg_params *p,
-                            g3d_sam_progress progress, void *user, g3d_sam_masks *out);
+                            const g3d_progress *progress, g3d_sam_masks *out);
 
 /* A mask provider (providers.h) running the automatic generator with params (NULL: defaults) on
  * the picture; scores are the predicted IoUs. Loads the model from path (errors as

@@ -91,7 +91,7 @@ static g3d_status collect(const g3d_sam_amg_params *p, const g3d_sam_prediction 
 }
 
 g3d_status g3d_sam_generate(const g3d_sam *m, const g3d_sam_image *img, const g3d_sam_amg_params *params,
-                            g3d_sam_progress progress, void *user, g3d_sam_masks *out)
+                            const g3d_progress *progress, g3d_sam_masks *out)
 {
     memset(out, 0, sizeof *out);
     g3d_sam_amg_params p;
@@ -120,7 +120,7 @@ g3d_status g3d_sam_generate(const g3d_sam *m, const g3d_sam_image *img, const g3
         rc = sam_predict_scaled(m, img, 1, pt, &label, NULL, NULL, 1, 0, &pr, NULL);
         if (rc == G3D_OK) rc = collect(&p, &pr, (float)px, (float)py, &list, &nc, &cap);
         g3d_sam_prediction_free(&pr);
-        if (rc == G3D_OK && progress && progress(user, k + 1, total)) rc = G3D_CANCELLED;
+        if (rc == G3D_OK && g3d_progress_report(progress, "masks", k + 1, total, NULL)) rc = G3D_CANCELLED;
     }
     if (rc == G3D_OK && nc) {
         qsort(list, (size_t)nc, sizeof *list, by_score);
@@ -190,7 +190,7 @@ static g3d_status provider_propose(void *ctx, const g3d_image *rgb, const g3d_im
     g3d_status rc = g3d_sam_set_image(s->model, px, rgb->w, rgb->h, &img, NULL);
     free(px);
     if (rc != G3D_OK) return rc;
-    rc = g3d_sam_generate(s->model, &img, &s->params, NULL, NULL, &mk);
+    rc = g3d_sam_generate(s->model, &img, &s->params, NULL, &mk);
     g3d_sam_image_free(&img);
     if (rc != G3D_OK) return rc;
     out->n = mk.n;
