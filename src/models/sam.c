@@ -22,7 +22,7 @@ float *sam_dup(const float *x, size_t n)
 
 void sam_transpose(const float *x, int rows, int cols, float *y)
 {
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if ((size_t)rows * cols > 65536)
     for (int c = 0; c < cols; c++)
         for (int r = 0; r < rows; r++) y[(size_t)c * rows + r] = x[(size_t)r * cols + c];
 }
