@@ -110,17 +110,55 @@ g3d_status g3d_sam_generate(const g3d_sam *m, const g3d_sam_image *img, const g3
     double offset = 1.0 / (2 * n), step = n > 1 ? ((1 - offset) - offset) / (n - 1) : 0;
     double sx = (double)img->in_w / img->w, sy = (double)img->in_h / img->h;
     cand *list = NULL;
-    int nc = 0, cap = 0, label = 1;
+    int nc = 0, cap = 0;
     g3d_status rc = G3D_OK;
-    for (int k = 0; k < total && rc == G3D_OK; k++) {
-        double gx = k % n == n - 1 ? 1 - offset : offset + (k % n) * step;
-        double gy = k / n == n - 1 ? 1 - offset : offset + (k / n) * step;
-        double px = gx * img->w, py = gy * img->h, pt[2] = {px * sx, py * sy};
-        g3d_sam_prediction pr;
-        rc = sam_predict_scaled(m, img, 1, pt, &label, NULL, NULL, 1, 0, &pr, NULL);
-        if (rc == G3D_OK) rc = collect(&p, &pr, (float)px, (float)py, &list, &nc, &cap);
-        g3d_sam_prediction_free(&pr);
-        if (rc == G3D_OK && g3d_progress_report(progress, "masks", k + 1, total, NULL)) rc = G3D_CANCELLED;
+    /* Points are decoded in parallel, each on one thread (the operators then run serially: no
+     * synchronisation inside the small products), and their masks gathered in grid order. */
+    enum { CHUNK = 32 };
+    typedef struct point_out {
+        cand *list;
+        int n, cap;
+        g3d_status rc;
+        char msg[256];
+    } point_out;
+    point_out po[CHUNK];
+    for (int k0 = 0; k0 < total && rc == G3D_OK; k0 += CHUNK) {
+        int cn = total - k0 < CHUNK ? total - k0 : CHUNK;
+        memset(po, 0, sizeof po);
+#pragma omp parallel for schedule(dynamic, 1)
+        for (int j = 0; j < cn; j++) {
+            int k = k0 + j, label = 1;
+            double gx = k % n == n - 1 ? 1 - offset : offset + (k % n) * step;
+            double gy = k / n == n - 1 ? 1 - offset : offset + (k / n) * step;
+            double px = gx * img->w, py = gy * img->h, pt[2] = {px * sx, py * sy};
+            g3d_sam_prediction pr;
+            g3d_status r = sam_predict_scaled(m, img, 1, pt, &label, NULL, NULL, 1, 0, &pr, NULL);
+            if (r == G3D_OK) r = collect(&p, &pr, (float)px, (float)py, &po[j].list, &po[j].n, &po[j].cap);
+            g3d_sam_prediction_free(&pr);
+            if ((po[j].rc = r) != G3D_OK) snprintf(po[j].msg, sizeof po[j].msg, "%s", g3d_error_message());
+        }
+        for (int j = 0; j < cn; j++) {
+            if (rc == G3D_OK && po[j].rc != G3D_OK) rc = G3D_ERR(po[j].rc, "%s", po[j].msg);
+            if (rc == G3D_OK && nc + po[j].n > cap) {
+                int ncap = 2 * (nc + po[j].n) + 64;
+                cand *l = realloc(list, sizeof(cand) * (size_t)ncap);
+                if (l) {
+                    list = l;
+                    cap = ncap;
+                } else
+                    rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+            }
+            for (int i = 0; i < po[j].n; i++) {
+                if (rc == G3D_OK) {
+                    list[nc] = po[j].list[i];
+                    list[nc].order = nc;
+                    nc++;
+                } else
+                    free(po[j].list[i].mask);
+            }
+            free(po[j].list);
+        }
+        if (rc == G3D_OK && g3d_progress_report(progress, "masks", k0 + cn, total, NULL)) rc = G3D_CANCELLED;
     }
     if (rc == G3D_OK && nc) {
         qsort(list, (size_t)nc, sizeof *list, by_score);
