@@ -6,6 +6,7 @@
  * time includes the preprocessing of a 1024x1024 picture (resize, normalisation).
  * Run: cmake --build build --target bench && nice ./build/bench_sam SAM_CHECKOUT [rounds=3]
  * (SAM_CHECKOUT: github.com/facebookresearch/segment-anything at dca509f; /usr/bin/python3 with torch). */
+#include "bench_twin.h"
 #include "gen3d/nn.h"
 #include "gen3d/sam.h"
 
@@ -17,46 +18,6 @@
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
-
-static double cpu_seconds(void)
-{
-    struct rusage r;
-    getrusage(RUSAGE_SELF, &r);
-    return (double)r.ru_utime.tv_sec + r.ru_stime.tv_sec + 1e-6 * ((double)r.ru_utime.tv_usec + r.ru_stime.tv_usec);
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double median(double *v, int n)
-{
-    qsort(v, (size_t)n, sizeof *v, cmp_double);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-/* The twin as a child process: its stdin and stdout are ours to write and read. */
-static pid_t spawn(char *const argv[], FILE **to, FILE **from)
-{
-    int in[2], out[2];
-    if (pipe(in) || pipe(out)) return -1;
-    pid_t pid = fork();
-    if (pid == 0) {
-        dup2(in[0], 0);
-        dup2(out[1], 1);
-        close(in[1]);
-        close(out[0]);
-        execv(argv[0], argv);
-        _exit(127);
-    }
-    close(in[0]);
-    close(out[1]);
-    *to = fdopen(in[1], "w");
-    *from = fdopen(out[0], "r");
-    return pid;
-}
 
 int main(int argc, char **argv)
 {

@@ -424,10 +424,24 @@ uint8_t *g3d_sam_rgb8(const g3d_image *rgb)
 
 /* ---- image encoder ------------------------------------------------------------------------ */
 
+/* Copies the tokens of a g x g grid `grid` [g*g, D] into windows of ws x ws `win` [windows, ws*ws, D]
+ * (to_windows), or back (the padding, which the grid does not have, is then dropped). */
+static void window_copy(float *win, float *grid, int g, int ws, int D, int to_windows)
+{
+    const int nside = (g + ws - 1) / ws, L = ws * ws;
+    for (int wy = 0; wy < nside; wy++)
+        for (int wx = 0; wx < nside; wx++)
+            for (int y = 0; y < ws && wy * ws + y < g; y++) {
+                int nx = g - wx * ws < ws ? g - wx * ws : ws;
+                float *a = win + ((size_t)(wy * nside + wx) * L + y * ws) * D, *b = grid + ((size_t)(wy * ws + y) * g + wx * ws) * D;
+                memcpy(to_windows ? a : b, to_windows ? b : a, sizeof(float) * (size_t)nx * D);
+            }
+}
+
 /* Self-attention of one block over the normalised tokens T [g*g, D] into A [g*g, D]: over the
  * whole grid, or over windows of the grid zero-padded to a multiple of the window (the padded
  * tokens take part as keys, as in the official window_partition). */
-static g3d_status enc_attention(const g3d_sam *m, const sam_enc_block *b, const float *T, float *A)
+static g3d_status enc_attention(const g3d_sam *m, const sam_enc_block *b, float *T, float *A)
 {
     const int g = m->grid, D = m->D, ws = b->window ? b->window : g, nside = (g + ws - 1) / ws;
     const int nw = nside * nside, L = ws * ws;
@@ -441,16 +455,7 @@ static g3d_status enc_attention(const g3d_sam *m, const sam_enc_block *b, const 
         rc = G3D_ERR(G3D_ERR_NOMEM, "SAM: out of memory for attention");
         goto done;
     }
-    if (b->window) {
-        for (int wy = 0; wy < nside; wy++)
-            for (int wx = 0; wx < nside; wx++)
-                for (int y = 0; y < ws; y++) {
-                    int gy = wy * ws + y, nx = g - wx * ws < ws ? g - wx * ws : ws;
-                    if (gy >= g) continue;
-                    memcpy(W + ((size_t)(wy * nside + wx) * L + y * ws) * D, T + ((size_t)gy * g + wx * ws) * D,
-                           sizeof(float) * (size_t)nx * D);
-                }
-    }
+    if (b->window) window_copy(W, T, g, ws, D, 1);
     if ((rc = g3d_nn_lin_forward(&b->qkv, b->window ? W : T, (int)rows, 0, QKV, 0, NULL)) != G3D_OK) goto done;
     for (int w = 0; w < nw && rc == G3D_OK; w++)
         rc = g3d_nn_relpos_tables(QKV + (size_t)w * L * 3 * D, 3 * D, m->heads, m->hd, ws, ws, ws, ws, b->relh, b->relw,
@@ -462,16 +467,7 @@ static g3d_status enc_attention(const g3d_sam *m, const sam_enc_block *b, const 
                      .bias = g3d_nn_bias_relpos_fn, .bias_ctx = &bias, .batch = nw, .bsq = (long)L * 3 * D,
                      .bsk = (long)L * 3 * D, .bsv = (long)L * 3 * D, .bso = (long)L * D};
     if ((rc = g3d_nn_attend(&a)) != G3D_OK) goto done;
-    if (b->window) {
-        for (int wy = 0; wy < nside; wy++)
-            for (int wx = 0; wx < nside; wx++)
-                for (int y = 0; y < ws; y++) {
-                    int gy = wy * ws + y, nx = g - wx * ws < ws ? g - wx * ws : ws;
-                    if (gy >= g) continue;
-                    memcpy(A + ((size_t)gy * g + wx * ws) * D, O + ((size_t)(wy * nside + wx) * L + y * ws) * D,
-                           sizeof(float) * (size_t)nx * D);
-                }
-    }
+    if (b->window) window_copy(O, A, g, ws, D, 0);
 done:
     free(W); free(QKV); free(rh); free(rw);
     if (O != A) free(O);
@@ -488,8 +484,9 @@ static g3d_status encode(const g3d_sam *m, const float *x, float *emb, g3d_sam_t
 {
     const int g = m->grid, D = m->D, N = g * g, C = m->C;
     int tracing = tr && tr->want;
-    float *X = malloc(sizeof(float) * (size_t)N * D), *T = malloc(sizeof(float) * (size_t)N * D);
-    float *A = malloc(sizeof(float) * (size_t)N * D), *H = malloc(sizeof(float) * (size_t)N * m->hidden);
+    const size_t wide = (size_t)N * (D > C ? D : C); /* T and A also hold the neck's [N, C] maps */
+    float *X = malloc(sizeof(float) * (size_t)N * D), *T = malloc(sizeof(float) * wide);
+    float *A = malloc(sizeof(float) * wide), *H = malloc(sizeof(float) * (size_t)N * m->hidden);
     g3d_status rc = G3D_OK;
     if (!X || !T || !A || !H || (tracing && !(tr->block = calloc((size_t)m->depth, sizeof(float *))))) {
         rc = G3D_ERR(G3D_ERR_NOMEM, "SAM: out of memory for the image encoder");
