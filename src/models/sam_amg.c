@@ -23,14 +23,15 @@ typedef struct cand {
     uint8_t *mask;
     float iou, stability, px, py;
     int box[4], area; /* box: x0, y0, x1, y1 inclusive */
+    float rank;       /* what NMS sorts by: the predicted IoU, then (small regions) 1 if unchanged */
     int order;
 } cand;
 
 static int by_score(const void *a, const void *b)
 {
     const cand *x = a, *y = b;
-    if (x->iou != y->iou) return x->iou > y->iou ? -1 : 1;
-    return x->order - y->order;
+    if (x->rank != y->rank) return x->rank > y->rank ? -1 : 1;
+    return x->order - y->order; /* ties keep their order, as torchvision's stable sort */
 }
 
 static float box_iou(const int *a, const int *b)
@@ -40,6 +41,114 @@ static float box_iou(const int *a, const int *b)
     float inter = (ix > 0 ? ix : 0) * (iy > 0 ? iy : 0);
     float aa = (float)(a[2] - a[0]) * (float)(a[3] - a[1]), ab = (float)(b[2] - b[0]) * (float)(b[3] - b[1]);
     return inter / (aa + ab - inter);
+}
+
+/* The bounding box (batched_mask_to_box: 0, 0, 0, 0 when empty) and area of c's mask. */
+static void mask_box(cand *c, int w, int h)
+{
+    int x0 = w, y0 = h, x1 = -1, y1 = -1, area = 0;
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            if (!c->mask[(size_t)y * w + x]) continue;
+            area++;
+            if (x < x0) x0 = x;
+            if (x > x1) x1 = x;
+            if (y < y0) y0 = y;
+            if (y > y1) y1 = y;
+        }
+    if (!area) x0 = y0 = x1 = y1 = 0;
+    c->box[0] = x0; c->box[1] = y0; c->box[2] = x1; c->box[3] = y1;
+    c->area = area;
+}
+
+/* Greedy box NMS: sorts list by rank (stable) and moves the survivors to its front; returns
+ * their count. */
+static int nms(cand *list, int nc, float thresh)
+{
+    for (int i = 0; i < nc; i++) list[i].order = i;
+    qsort(list, (size_t)nc, sizeof *list, by_score);
+    int nk = 0;
+    for (int i = 0; i < nc; i++) {
+        int ok = 1;
+        for (int j = 0; j < nk && ok; j++) ok = !(box_iou(list[i].box, list[j].box) > thresh);
+        if (ok) {
+            cand t = list[nk];
+            list[nk++] = list[i];
+            list[i] = t;
+        }
+    }
+    return nk;
+}
+
+/* remove_small_regions: the 8-connected components of the mask (islands) or of its complement
+ * (holes) smaller than `area` pixels are removed or filled; when every island is small the
+ * largest stays. lab and stack hold w*h ints. Returns 1 if the mask changed. */
+static int remove_small(uint8_t *mask, int w, int h, int area, int holes, int *lab, int *stack, int **sizes, int *cap)
+{
+    const size_t npx = (size_t)w * h;
+    memset(lab, 0, sizeof(int) * npx);
+    int n = 0, any_small = 0;
+    for (size_t s0 = 0; s0 < npx; s0++) {
+        if ((mask[s0] != 0) == holes || lab[s0]) continue;
+        if (n + 1 >= *cap) {
+            int nc = 2 * *cap + 64, *ns = realloc(*sizes, sizeof(int) * (size_t)nc);
+            if (!ns) return -1;
+            *sizes = ns;
+            *cap = nc;
+        }
+        int L = ++n, top = 0, count = 0;
+        lab[s0] = L;
+        stack[top++] = (int)s0;
+        while (top) {
+            int p = stack[--top], px = p % w, py = p / w;
+            count++;
+            for (int dy = -1; dy <= 1; dy++)
+                for (int dx = -1; dx <= 1; dx++) {
+                    int qx = px + dx, qy = py + dy;
+                    if (qx < 0 || qy < 0 || qx >= w || qy >= h) continue;
+                    size_t q = (size_t)qy * w + qx;
+                    if ((mask[q] != 0) == holes || lab[q]) continue;
+                    lab[q] = L;
+                    stack[top++] = (int)q;
+                }
+        }
+        (*sizes)[L] = count;
+        any_small |= count < area;
+    }
+    if (!any_small) return 0;
+    int biggest = 0, kept = 0;
+    for (int L = 1; L <= n; L++) {
+        if ((*sizes)[L] > (biggest ? (*sizes)[biggest] : -1)) biggest = L;
+        kept += (*sizes)[L] >= area;
+    }
+    for (size_t i = 0; i < npx; i++) {
+        int L = lab[i];
+        if (holes)
+            mask[i] = !L || (*sizes)[L] < area;
+        else
+            mask[i] = L && (kept ? (*sizes)[L] >= area : L == biggest);
+    }
+    return 1;
+}
+
+/* postprocess_small_regions on the generator's masks: each mask's small holes filled and small
+ * islands removed; NMS again, preferring the masks that needed no change. Returns the count
+ * kept (at the front of list), or -1 when out of memory. */
+static int small_regions(cand *list, int nc, int w, int h, int area, float thresh)
+{
+    size_t npx = (size_t)w * h;
+    int *lab = malloc(sizeof(int) * npx), *stack = malloc(sizeof(int) * npx), *sizes = NULL, cap = 0, bad = !lab || !stack;
+    for (int i = 0; i < nc && !bad; i++) {
+        int a = remove_small(list[i].mask, w, h, area, 1, lab, stack, &sizes, &cap);
+        int b = a < 0 ? -1 : remove_small(list[i].mask, w, h, area, 0, lab, stack, &sizes, &cap);
+        bad = a < 0 || b < 0;
+        list[i].rank = a || b ? 0.0f : 1.0f;
+        mask_box(&list[i], w, h);
+    }
+    free(lab);
+    free(stack);
+    free(sizes);
+    return bad ? -1 : nms(list, nc, thresh);
 }
 
 /* Keeps the candidate masks of one prediction that pass the thresholds (appended to *list). */
@@ -66,22 +175,9 @@ static g3d_status collect(const g3d_sam_amg_params *p, const g3d_sam_prediction 
         }
         cand *c = &(*list)[*n];
         if (!(c->mask = malloc(npx))) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
-        int x0 = pr->w, y0 = pr->h, x1 = -1, y1 = -1, area = 0;
-        for (int y = 0; y < pr->h; y++)
-            for (int x = 0; x < pr->w; x++) {
-                int on = lg[(size_t)y * pr->w + x] > 0;
-                c->mask[(size_t)y * pr->w + x] = (uint8_t)on;
-                if (!on) continue;
-                area++;
-                if (x < x0) x0 = x;
-                if (x > x1) x1 = x;
-                if (y < y0) y0 = y;
-                if (y > y1) y1 = y;
-            }
-        if (!area) x0 = y0 = x1 = y1 = 0; /* batched_mask_to_box's empty box */
-        c->box[0] = x0; c->box[1] = y0; c->box[2] = x1; c->box[3] = y1;
-        c->area = area;
-        c->iou = pr->iou[k];
+        for (size_t i = 0; i < npx; i++) c->mask[i] = lg[i] > 0;
+        mask_box(c, pr->w, pr->h);
+        c->iou = c->rank = pr->iou[k];
         c->stability = stab;
         c->px = px;
         c->py = py;
@@ -99,12 +195,10 @@ g3d_status g3d_sam_generate(const g3d_sam *m, const g3d_sam_image *img, const g3
         p = *params;
     else
         g3d_sam_amg_params_default(&p);
-    if (p.points_per_side < 1 || p.points_per_side > 256 || !(p.stability_score_offset >= 0) ||
+    if (p.points_per_side < 1 || p.points_per_side > 256 || !(p.stability_score_offset >= 0) || p.min_mask_region_area < 0 ||
         !(p.box_nms_thresh >= 0 && p.box_nms_thresh <= 1))
-        return G3D_ERR(G3D_ERR_ARG, "SAM generator: points per side must be 1..256, the stability offset >= 0 and "
-                                    "the NMS threshold in [0, 1]");
-    if (p.min_mask_region_area > 0)
-        return G3D_ERR(G3D_ERR_UNSUPPORTED, "SAM generator: min_mask_region_area is not supported (use 0)");
+        return G3D_ERR(G3D_ERR_ARG, "SAM generator: points per side must be 1..256, the stability offset and the "
+                                    "minimum region area >= 0 and the NMS threshold in [0, 1]");
     const int n = p.points_per_side, total = n * n;
     /* build_point_grid: np.linspace(offset, 1 - offset, n) along each axis, x fastest */
     double offset = 1.0 / (2 * n), step = n > 1 ? ((1 - offset) - offset) / (n - 1) : 0;
@@ -161,16 +255,13 @@ g3d_status g3d_sam_generate(const g3d_sam *m, const g3d_sam_image *img, const g3
         if (rc == G3D_OK && g3d_progress_report(progress, "masks", k0 + cn, total, NULL)) rc = G3D_CANCELLED;
     }
     if (rc == G3D_OK && nc) {
-        qsort(list, (size_t)nc, sizeof *list, by_score);
-        int nk = 0;
-        for (int i = 0; i < nc; i++) {
-            int ok = 1;
-            for (int j = 0; j < nk && ok; j++) ok = !(box_iou(list[i].box, list[j].box) > p.box_nms_thresh);
-            if (ok) {
-                cand t = list[nk];
-                list[nk++] = list[i];
-                list[i] = t;
-            }
+        int nk = nms(list, nc, p.box_nms_thresh);
+        /* the official second NMS uses the larger of box_nms_thresh and crop_nms_thresh (0.7) */
+        if (p.min_mask_region_area > 0 &&
+            (nk = small_regions(list, nk, img->w, img->h, p.min_mask_region_area,
+                                p.box_nms_thresh > 0.7f ? p.box_nms_thresh : 0.7f)) < 0) {
+            rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+            nk = 0;
         }
         size_t npx = (size_t)img->w * img->h;
         out->masks = malloc(npx * nk);

@@ -97,6 +97,8 @@ static int run(int argc, char **argv)
         {0, "stability-thresh", G3D_OPT_DOUBLE, &stab, "T", "keep masks with stability at least T (0: all)"},
         {0, "stability-offset", G3D_OPT_DOUBLE, &off, "D", "logit offset of the stability score"},
         {0, "nms-thresh", G3D_OPT_DOUBLE, &nms, "T", "box IoU above which the lower-scored mask goes"},
+        {0, "min-region-area", G3D_OPT_INT, &p.min_mask_region_area, "PX",
+         "fill holes and drop islands smaller than this in every mask (0: off)"},
         G3D_COMMON_OPTS(&common),
     };
     const char *pos[1];
@@ -108,9 +110,10 @@ static int run(int argc, char **argv)
     p.stability_score_thresh = (float)stab;
     p.stability_score_offset = (float)off;
     p.box_nms_thresh = (float)nms;
-    if (p.points_per_side < 1 || p.points_per_side > 256 || !(off >= 0) || !(nms >= 0 && nms <= 1))
-        return g3d_cli_errorf(G3D_EXIT_USAGE, "--points-per-side must be 1..256, --stability-offset >= 0, "
-                                              "--nms-thresh in [0, 1]");
+    if (p.points_per_side < 1 || p.points_per_side > 256 || !(off >= 0) || !(nms >= 0 && nms <= 1) ||
+        p.min_mask_region_area < 0)
+        return g3d_cli_errorf(G3D_EXIT_USAGE, "--points-per-side must be 1..256, --stability-offset and "
+                                              "--min-region-area >= 0, --nms-thresh in [0, 1]");
     g3d_cli_common_apply(&common);
 
     g3d_image img = {0};
