@@ -202,6 +202,19 @@ TEST(pil_resize)
                 bad += v != want;
             }
     CHECK_MSG(bad == 0, "%zu preprocessed values differ from the official ones", bad);
+    /* shrinking 300 x 170 to 256 x 145 (the antialiasing filter spans more than two pixels) */
+    float *src = tensor("resize.src_u8", 170 * 300 * 3), *want = tensor("resize.out_u8", 145 * 256 * 3);
+    uint8_t *s8 = malloc(170 * 300 * 3);
+    if (src && want && s8) {
+        for (int i = 0; i < 170 * 300 * 3; i++) s8[i] = (uint8_t)src[i];
+        CHECK_OK(g3d_resize_u8_pil_bilinear(s8, 300, 170, 3, a, 256, 145));
+        bad = 0;
+        for (int i = 0; i < 145 * 256 * 3; i++) bad += a[i] != (uint8_t)want[i];
+        CHECK_MSG(bad == 0, "%zu shrunk values differ from PIL's", bad);
+    }
+    free(src);
+    free(want);
+    free(s8);
     CHECK_FAILS(g3d_resize_u8_pil_bilinear(rgb, 0, H, 3, a, 256, 181));
 done:
     free(a);
