@@ -41,6 +41,10 @@ expect 0 "world with SAM" "$GEN3D" world --default-input "$MB" --seg-model "$CK"
     -t 2 -o "$T/world"
 grep -q "layer masks: Segment Anything" "$T/err" && ok "world uses SAM" || bad "world uses SAM"
 [ -s "$T/world/layers/bg_rgb.png" ] && ok "layers written" || bad "layers written"
+expect 0 "generate with SAM" "$GEN3D" generate --default-input "$MB" --seg-model "$CK" --max-side 64 --steps 1 \
+    --angle 10 --iters 10 --no-video -q -t 2 -o "$T/gen"
+grep -q '"mask_provider":[[:space:]]*"sam"' "$T/gen/config.json" && grep -q '"seg_model"' "$T/gen/config.json" &&
+    ok "config.json names SAM and its checkpoint" || bad "config.json names SAM and its checkpoint"
 expect 1 "world with a non-SAM checkpoint" "$GEN3D" world --default-input "$MB" --seg-model "$IMG" --max-side 96 -o "$T/never"
 grep -q "lama_image.png" "$T/err" && ok "names the file" || bad "names the file"
 [ ! -e "$T/never" ] && ok "no world folder after failures" || bad "no world folder after failures"
