@@ -25,6 +25,9 @@ cmp -s "$T/a/masks.json" "$T/b/masks.json" && cmp -s "$T/a/overlay.png" "$T/b/ov
 expect 0 "default thresholds" "$GEN3D" segment -q -m "$CK" -i "$IMG" --points-per-side 2 -o "$T/c"
 [ -s "$T/c/masks.json" ] && ok "writes masks.json with the defaults" || bad "writes masks.json with the defaults"
 
+expect 0 "info names the model" "$GEN3D" info "$CK"
+grep -q "Segment Anything (ViT encoder width 32, 4 blocks, input 256; prompt width 32)" "$T/out" &&
+    ok "info describes SAM" || bad "info describes SAM"
 expect 1 "a checkpoint without SAM" "$GEN3D" segment -m "$FIX/dav2_tiny.pth" -i "$IMG" -o "$T/never"
 grep -q "dav2_tiny.pth: not a Segment Anything checkpoint" "$T/err" && ok "names the checkpoint" || bad "names the checkpoint"
 expect 1 "a truncated checkpoint" "$GEN3D" segment -m "$FIX/truncated.pth" -i "$IMG" -o "$T/never"
