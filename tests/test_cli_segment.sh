@@ -25,6 +25,14 @@ cmp -s "$T/a/masks.json" "$T/b/masks.json" && cmp -s "$T/a/overlay.png" "$T/b/ov
 expect 0 "default thresholds" "$GEN3D" segment -q -m "$CK" -i "$IMG" --points-per-side 2 -o "$T/c"
 [ -s "$T/c/masks.json" ] && ok "writes masks.json with the defaults" || bad "writes masks.json with the defaults"
 
+expect 0 "one point" "$GEN3D" segment -q -m "$CK" -i "$IMG" --point 10,12 -o "$T/p"
+[ "$(grep -c '"predicted_iou"' "$T/p/masks.json")" = 3 ] && [ -s "$T/p/mask_002.png" ] && ok "three masks for a point" || bad "three masks for a point"
+grep -q '"point_coords":[[:space:]]*\[10, 12\]' "$T/p/masks.json" && ok "records the point" || bad "records the point"
+expect 0 "a box and a background point" "$GEN3D" segment -q -m "$CK" -i "$IMG" --box 1,2,30,25 --point 40,30,0 -o "$T/q"
+cmp -s "$T/p/masks.json" "$T/q/masks.json" && bad "the prompts give other masks" || ok "the prompts give other masks"
+expect 2 "bad point" "$GEN3D" segment -m "$CK" -i "$IMG" --point 10 -o "$T/never"
+expect 2 "bad label" "$GEN3D" segment -m "$CK" -i "$IMG" --point 10,12,2 -o "$T/never"
+expect 2 "bad box" "$GEN3D" segment -m "$CK" -i "$IMG" --box 1,2,3 -o "$T/never"
 expect 0 "info names the model" "$GEN3D" info "$CK"
 grep -q "Segment Anything (ViT encoder width 32, 4 blocks, input 256; prompt width 32)" "$T/out" &&
     ok "info describes SAM" || bad "info describes SAM"

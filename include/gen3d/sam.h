@@ -127,6 +127,12 @@ typedef struct g3d_sam_masks {
 } g3d_sam_masks;
 void g3d_sam_masks_free(g3d_sam_masks *s);
 
+/* A prediction's masks (logits > 0) in the generator's form, in the prediction's order, with
+ * their stability scores (at stability_offset), boxes and areas; (px, py) is recorded as every
+ * mask's point. Free with g3d_sam_masks_free. */
+g3d_status g3d_sam_prediction_masks(const g3d_sam_prediction *pr, float stability_offset, float px, float py,
+                                    g3d_sam_masks *out);
+
 /* The masks of img (already encoded), ordered by decreasing predicted IoU (the official order).
  * NULL params: the defaults. progress (may be NULL) hears of each grid point, stage "masks". Errors: G3D_ERR_ARG for parameters out of range, G3D_ERR_NOMEM,
  * G3D_CANCELLED. Free with g3d_sam_masks_free. */

@@ -186,6 +186,51 @@ static g3d_status collect(const g3d_sam_amg_params *p, const g3d_sam_prediction 
     return G3D_OK;
 }
 
+/* The first nk candidates as the public result (boxes as x, y, w, h). */
+static g3d_status to_masks(const cand *list, int nk, int w, int h, g3d_sam_masks *out)
+{
+    size_t npx = (size_t)w * h;
+    out->w = w;
+    out->h = h;
+    if (!nk) return G3D_OK;
+    out->masks = malloc(npx * nk);
+    out->iou = malloc(sizeof(float) * nk);
+    out->stability = malloc(sizeof(float) * nk);
+    out->boxes = malloc(sizeof(int) * 4 * nk);
+    out->area = malloc(sizeof(int) * nk);
+    out->points = malloc(sizeof(float) * 2 * nk);
+    if (!out->masks || !out->iou || !out->stability || !out->boxes || !out->area || !out->points)
+        return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    for (int i = 0; i < nk; i++) {
+        const cand *c = &list[i];
+        memcpy(out->masks + npx * i, c->mask, npx);
+        out->iou[i] = c->iou;
+        out->stability[i] = c->stability;
+        int *b = out->boxes + 4 * i;
+        b[0] = c->box[0]; b[1] = c->box[1]; b[2] = c->box[2] - c->box[0]; b[3] = c->box[3] - c->box[1];
+        out->area[i] = c->area;
+        out->points[2 * i] = c->px;
+        out->points[2 * i + 1] = c->py;
+    }
+    out->n = nk;
+    return G3D_OK;
+}
+
+g3d_status g3d_sam_prediction_masks(const g3d_sam_prediction *pr, float stability_offset, float px, float py,
+                                    g3d_sam_masks *out)
+{
+    memset(out, 0, sizeof *out);
+    g3d_sam_amg_params p = {.stability_score_offset = stability_offset};
+    cand *list = NULL;
+    int nc = 0, cap = 0;
+    g3d_status rc = collect(&p, pr, px, py, &list, &nc, &cap);
+    if (rc == G3D_OK) rc = to_masks(list, nc, pr->w, pr->h, out);
+    for (int i = 0; i < nc; i++) free(list[i].mask);
+    free(list);
+    if (rc != G3D_OK) g3d_sam_masks_free(out);
+    return rc;
+}
+
 g3d_status g3d_sam_generate(const g3d_sam *m, const g3d_sam_image *img, const g3d_sam_amg_params *params,
                             const g3d_progress *progress, g3d_sam_masks *out)
 {
@@ -263,27 +308,7 @@ g3d_status g3d_sam_generate(const g3d_sam *m, const g3d_sam_image *img, const g3
             rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
             nk = 0;
         }
-        size_t npx = (size_t)img->w * img->h;
-        out->masks = malloc(npx * nk);
-        out->iou = malloc(sizeof(float) * nk);
-        out->stability = malloc(sizeof(float) * nk);
-        out->boxes = malloc(sizeof(int) * 4 * nk);
-        out->area = malloc(sizeof(int) * nk);
-        out->points = malloc(sizeof(float) * 2 * nk);
-        if (!out->masks || !out->iou || !out->stability || !out->boxes || !out->area || !out->points)
-            rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
-        for (int i = 0; i < nk && rc == G3D_OK; i++) {
-            const cand *c = &list[i];
-            memcpy(out->masks + npx * i, c->mask, npx);
-            out->iou[i] = c->iou;
-            out->stability[i] = c->stability;
-            int *b = out->boxes + 4 * i;
-            b[0] = c->box[0]; b[1] = c->box[1]; b[2] = c->box[2] - c->box[0]; b[3] = c->box[3] - c->box[1];
-            out->area[i] = c->area;
-            out->points[2 * i] = c->px;
-            out->points[2 * i + 1] = c->py;
-        }
-        out->n = nk;
+        if (rc == G3D_OK) rc = to_masks(list, nk, img->w, img->h, out);
     }
     for (int i = 0; i < nc; i++) free(list[i].mask);
     free(list);

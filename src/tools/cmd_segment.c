@@ -5,6 +5,7 @@
 #include "gen3d/sam.h"
 
 #include <cjson/cJSON.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -15,7 +16,9 @@ static const char *DESCRIPTION =
     "per point, kept when the predicted IoU and the stability pass their thresholds, duplicates\n"
     "removed by box non-maximum suppression. Writes into the output folder mask_NNN.png (one per\n"
     "mask, best first), masks.json (each mask's predicted IoU, stability, box x y w h, area and\n"
-    "grid point) and overlay.png (the masks tinted over the picture).";
+    "grid point; the prompt's point or the box centre with --point/--box) and overlay.png (the masks tinted over the picture).\n"
+    "With --point and/or --box the predictor runs on that one prompt instead and writes its three\n"
+    "masks (SamPredictor.predict with multimask output) the same way.";
 
 /* A fixed colour per mask index (golden-ratio hues). */
 static void colour(int i, float rgb[3])
@@ -82,7 +85,7 @@ static g3d_status write_outputs(const char *dir, const g3d_image *img, const g3d
 static int run(int argc, char **argv)
 {
     g3d_cli_common common;
-    const char *input = NULL, *model_path = NULL;
+    const char *input = NULL, *model_path = NULL, *point = NULL, *box = NULL;
     g3d_sam_amg_params p;
     g3d_sam_amg_params_default(&p);
     double iou = p.pred_iou_thresh, stab = p.stability_score_thresh, off = p.stability_score_offset,
@@ -99,6 +102,8 @@ static int run(int argc, char **argv)
         {0, "nms-thresh", G3D_OPT_DOUBLE, &nms, "T", "box IoU above which the lower-scored mask goes"},
         {0, "min-region-area", G3D_OPT_INT, &p.min_mask_region_area, "PX",
          "fill holes and drop islands smaller than this in every mask (0: off)"},
+        {0, "point", G3D_OPT_STRING, &point, "X,Y[,L]", "one prompt point in pixels, label L 1 (default) or 0"},
+        {0, "box", G3D_OPT_STRING, &box, "X0,Y0,X1,Y1", "one prompt box in pixels"},
         G3D_COMMON_OPTS(&common),
     };
     const char *pos[1];
@@ -114,6 +119,20 @@ static int run(int argc, char **argv)
         p.min_mask_region_area < 0)
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--points-per-side must be 1..256, --stability-offset and "
                                               "--min-region-area >= 0, --nms-thresh in [0, 1]");
+    float pt[2], bx[4];
+    int label = 1, np = 0;
+    if (point) {
+        char end = 0;
+        int k = sscanf(point, "%f,%f,%d%c", &pt[0], &pt[1], &label, &end);
+        if ((k != 2 && k != 3) || (label != 0 && label != 1) || !isfinite(pt[0]) || !isfinite(pt[1]))
+            return g3d_cli_errorf(G3D_EXIT_USAGE, "--point must be X,Y or X,Y,LABEL with LABEL 0 or 1, not '%s'", point);
+        np = 1;
+    }
+    if (box) {
+        char end = 0;
+        if (sscanf(box, "%f,%f,%f,%f%c", &bx[0], &bx[1], &bx[2], &bx[3], &end) != 4 || !isfinite(bx[0] + bx[1] + bx[2] + bx[3]))
+            return g3d_cli_errorf(G3D_EXIT_USAGE, "--box must be X0,Y0,X1,Y1, not '%s'", box);
+    }
     g3d_cli_common_apply(&common);
 
     g3d_image img = {0};
@@ -132,10 +151,17 @@ static int run(int argc, char **argv)
     }
     double t0 = g3d_time_now();
     if (rc == G3D_OK) rc = g3d_sam_set_image(model, px, img.w, img.h, &emb, NULL);
-    if (rc == G3D_OK) {
-        g3d_log(G3D_LOG_INFO, "image encoder: %.2f s", g3d_time_now() - t0);
+    if (rc == G3D_OK) g3d_log(G3D_LOG_INFO, "image encoder: %.2f s", g3d_time_now() - t0);
+    if (rc == G3D_OK && (point || box)) {
+        g3d_sam_prompt prompt = {np, np ? pt : NULL, np ? &label : NULL, box ? bx : NULL, NULL};
+        g3d_sam_prediction pr;
+        rc = g3d_sam_predict(model, &emb, &prompt, 1, &pr, NULL);
+        if (rc == G3D_OK)
+            rc = g3d_sam_prediction_masks(&pr, p.stability_score_offset, np ? pt[0] : 0.5f * (bx[0] + bx[2]),
+                                          np ? pt[1] : 0.5f * (bx[1] + bx[3]), &mk);
+        g3d_sam_prediction_free(&pr);
+    } else if (rc == G3D_OK)
         rc = g3d_sam_generate(model, &emb, &p, &prog, &mk);
-    }
     if (rc == G3D_OK) rc = g3d_atomic_dir_begin(common.output, &tmp);
     if (rc == G3D_OK) rc = write_outputs(tmp, &img, &mk);
     if (rc == G3D_OK) rc = g3d_atomic_dir_commit(tmp, common.output);
