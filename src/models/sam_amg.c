@@ -251,6 +251,7 @@ g3d_status g3d_sam_generate(const g3d_sam *m, const g3d_sam_image *img, const g3
     cand *list = NULL;
     int nc = 0, cap = 0;
     g3d_status rc = G3D_OK;
+    const float iou_floor = p.pred_iou_thresh > 0 ? p.pred_iou_thresh : -INFINITY;
     /* Points are decoded in parallel, each on one thread (the operators then run serially: no
      * synchronisation inside the small products), and their masks gathered in grid order. */
     enum { CHUNK = 32 };
@@ -271,7 +272,7 @@ g3d_status g3d_sam_generate(const g3d_sam *m, const g3d_sam_image *img, const g3
             double gy = k / n == n - 1 ? 1 - offset : offset + (k / n) * step;
             double px = gx * img->w, py = gy * img->h, pt[2] = {px * sx, py * sy};
             g3d_sam_prediction pr;
-            g3d_status r = sam_predict_scaled(m, img, 1, pt, &label, NULL, NULL, 1, 0, &pr, NULL);
+            g3d_status r = sam_predict_scaled(m, img, 1, pt, &label, NULL, NULL, 1, 0, iou_floor, &pr, NULL);
             if (r == G3D_OK) r = collect(&p, &pr, (float)px, (float)py, &po[j].list, &po[j].n, &po[j].cap);
             g3d_sam_prediction_free(&pr);
             if ((po[j].rc = r) != G3D_OK) snprintf(po[j].msg, sizeof po[j].msg, "%s", g3d_error_message());

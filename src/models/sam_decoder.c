@@ -234,7 +234,7 @@ static g3d_status upscale_mask(const g3d_sam *m, const g3d_sam_image *img, const
 
 g3d_status sam_predict_scaled(const g3d_sam *m, const g3d_sam_image *img, int np, const double *pts, const int *labels,
                               const double *box, const float *mask_input, int multimask, int round_early,
-                              g3d_sam_prediction *out, g3d_sam_trace *tr)
+                              float iou_floor, g3d_sam_prediction *out, g3d_sam_trace *tr)
 {
     memset(out, 0, sizeof *out);
     const int C = m->C, g = m->grid, N = g * g, L = 4 * g, nm = m->nmask;
@@ -277,7 +277,10 @@ g3d_status sam_predict_scaled(const g3d_sam *m, const g3d_sam_image *img, int np
     for (int k = 0; k < n && rc == G3D_OK; k++) {
         out->iou[k] = iou[first + k];
         memcpy(out->low_res + (size_t)k * L * L, low + (size_t)(first + k) * L * L, sizeof(float) * L * L);
-        rc = upscale_mask(m, img, low + (size_t)(first + k) * L * L, scratch, crop,
+        if (!(out->iou[k] > iou_floor))
+            memset(out->logits + (size_t)k * img->w * img->h, 0, sizeof(float) * img->w * img->h);
+        else
+            rc = upscale_mask(m, img, low + (size_t)(first + k) * L * L, scratch, crop,
                           out->logits + (size_t)k * img->w * img->h);
     }
 done:
@@ -304,7 +307,8 @@ g3d_status g3d_sam_predict(const g3d_sam *m, const g3d_sam_image *img, const g3d
     }
     if (p->box)
         for (int k = 0; k < 4; k++) box[k] = p->box[k] * (k % 2 ? sy : sx);
-    g3d_status rc = sam_predict_scaled(m, img, np, pts, p->labels, p->box ? box : NULL, p->mask_input, multimask, 1, out, trace);
+    g3d_status rc = sam_predict_scaled(m, img, np, pts, p->labels, p->box ? box : NULL, p->mask_input, multimask, 1,
+                                      -INFINITY, out, trace);
     free(pts);
     return rc;
 }

@@ -58,9 +58,10 @@ void sam_transpose(const float *x, int rows, int cols, float *y);
 /* One prompt with coordinates already in the input frame (ResizeLongestSide applied): pts
  * [np, 2], box [4] or NULL. round_early: the coordinates become float32 before the half-pixel
  * shift (the predictor's numpy path) instead of after dividing by the input size (the
- * generator's float64 points). */
+ * generator's float64 points). Masks whose predicted IoU is not above iou_floor are not resized
+ * to the picture (their logits are left at 0: the generator drops them first). */
 g3d_status sam_predict_scaled(const g3d_sam *m, const g3d_sam_image *img, int np, const double *pts, const int *labels,
                               const double *box, const float *mask_input, int multimask, int round_early,
-                              g3d_sam_prediction *out, g3d_sam_trace *tr);
+                              float iou_floor, g3d_sam_prediction *out, g3d_sam_trace *tr);
 
 #endif /* G3D_SAM_INT_H */
