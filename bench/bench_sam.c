@@ -29,21 +29,12 @@ int main(int argc, char **argv)
     const int threads = 2, rounds = argc > 2 ? atoi(argv[2]) : 3, size = 1024;
     if (rounds < 1 || rounds > 100) return 2;
     omp_set_num_threads(threads);
-    char save[] = "/tmp/bench_sam_XXXXXX";
-    int fd = mkstemp(save);
-    if (fd < 0) return 1;
-    close(fd);
-    char th[16];
+    char th[16], save[32];
     snprintf(th, sizeof th, "%d", threads);
-    char *pyargv[] = {"/usr/bin/python3", G3D_SOURCE_DIR "/bench/bench_sam_torch.py", argv[1], save, th, NULL};
+    const char *args[] = {th, NULL};
     FILE *to = NULL, *from = NULL;
-    pid_t py = spawn(pyargv, &to, &from);
-    char line[256] = "";
-    if (py < 0 || !to || !from || !fgets(line, sizeof line, from) || strncmp(line, "ready", 5)) {
-        fprintf(stderr, "the PyTorch twin did not start (a segment-anything checkout and /usr/bin/python3 with torch are needed)\n");
-        unlink(save);
-        return 1;
-    }
+    pid_t py;
+    if (twin_start(G3D_SOURCE_DIR "/bench/bench_sam_torch.py", argv[1], args, save, &to, &from, &py)) return 1;
     g3d_sam *m = NULL;
     double t0 = g3d_time_now();
     g3d_status rc = g3d_sam_load_file(save, &m);
@@ -70,9 +61,7 @@ int main(int argc, char **argv)
         }
         double tc = g3d_time_now() - t0, cc = cpu_seconds() - c0, tt = 0, ct = 0;
         g3d_sam_image_free(&img);
-        fprintf(to, "go\n");
-        fflush(to);
-        if (!fgets(line, sizeof line, from) || sscanf(line, "torch_seconds %lf %lf", &tt, &ct) != 2) return 1;
+        if (twin_round(to, from, &tt, &ct)) return 1;
         printf("round %d: gen3d %.3f s (CPU %.3f s), PyTorch %.3f s (CPU %.3f s): %.2fx (CPU %.2fx)\n", k + 1, tc, cc, tt,
                ct, tt / tc, ct / cc);
         fflush(stdout);
