@@ -102,18 +102,21 @@ g3d_status g3d_sam_predict(const g3d_sam *m, const g3d_sam_image *img, const g3d
                            g3d_sam_prediction *out, g3d_sam_trace *trace);
 void g3d_sam_prediction_free(g3d_sam_prediction *p);
 
-/* ---- automatic mask generation (SamAutomaticMaskGenerator, one crop layer) ---------------- */
+/* ---- automatic mask generation (SamAutomaticMaskGenerator, one crop layer) ----------------
+ * Grid points are decoded in parallel (one per thread); the result does not depend on the
+ * thread count. */
 typedef struct g3d_sam_amg_params {
     int points_per_side;          /* 32: a points_per_side^2 grid of foreground points */
     float pred_iou_thresh;        /* 0.88: keep masks with predicted IoU above it (0: no test) */
     float stability_score_thresh; /* 0.95: keep masks with stability at least this (0: no test) */
     float stability_score_offset; /* 1.0: logit offset of the stability score */
     float box_nms_thresh;         /* 0.7: box IoU above which the lower-scored mask goes */
-    int min_mask_region_area;     /* 0: > 0 fills holes and removes islands (8-connected) smaller
-                                     than this many pixels, then NMS again (at the larger of
+    int min_mask_region_area;     /* 0 (off); > 0 fills holes and removes islands (8-connected)
+                                     smaller than this many pixels, then NMS again (at the larger of
                                      box_nms_thresh and 0.7, the official crop_nms_thresh) preferring
                                      unchanged masks */
 } g3d_sam_amg_params;
+/* Fills the official defaults above. */
 void g3d_sam_amg_params_default(g3d_sam_amg_params *p);
 
 typedef struct g3d_sam_masks {
