@@ -7,6 +7,7 @@
  * Run: cmake --build build --target bench && nice ./build/bench_lama LAMA_CHECKOUT [rounds=5] [size=512]
  * (LAMA_CHECKOUT: github.com/advimman/lama at 786f593; /usr/bin/python3 with torch). */
 #include "gen3d/lama.h"
+#include "bench_twin.h"
 #include "gen3d/nn.h"
 
 #include <omp.h>
@@ -18,46 +19,6 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-static double cpu_seconds(void)
-{
-    struct rusage r;
-    getrusage(RUSAGE_SELF, &r);
-    return (double)r.ru_utime.tv_sec + r.ru_stime.tv_sec + 1e-6 * ((double)r.ru_utime.tv_usec + r.ru_stime.tv_usec);
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double median(double *v, int n)
-{
-    qsort(v, (size_t)n, sizeof *v, cmp_double);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-/* The twin as a child process: its stdin and stdout are ours to write and read. */
-static pid_t spawn(char *const argv[], FILE **to, FILE **from)
-{
-    int in[2], out[2];
-    if (pipe(in) || pipe(out)) return -1;
-    pid_t pid = fork();
-    if (pid == 0) {
-        dup2(in[0], 0);
-        dup2(out[1], 1);
-        close(in[1]);
-        close(out[0]);
-        execv(argv[0], argv);
-        _exit(127);
-    }
-    close(in[0]);
-    close(out[1]);
-    *to = fdopen(in[1], "w");
-    *from = fdopen(out[0], "r");
-    return pid;
-}
-
 int main(int argc, char **argv)
 {
     if (argc < 2) {
@@ -67,22 +28,13 @@ int main(int argc, char **argv)
     g3d_process_setup(argv);
     const int threads = 2, rounds = argc > 2 ? atoi(argv[2]) : 5, size = argc > 3 ? atoi(argv[3]) : 512;
     omp_set_num_threads(threads);
-    char save[] = "/tmp/bench_lama_XXXXXX";
-    int fd = mkstemp(save);
-    if (fd < 0) return 1;
-    close(fd);
-    char sz[16], th[16];
+    char sz[16], th[16], save[32];
     snprintf(sz, sizeof sz, "%d", size);
     snprintf(th, sizeof th, "%d", threads);
-    char *pyargv[] = {"/usr/bin/python3", G3D_SOURCE_DIR "/bench/bench_lama_torch.py", argv[1], save, sz, th, NULL};
+    const char *args[] = {sz, th, NULL};
     FILE *to = NULL, *from = NULL;
-    pid_t py = spawn(pyargv, &to, &from);
-    char line[256] = "";
-    if (py < 0 || !to || !from || !fgets(line, sizeof line, from) || strncmp(line, "ready", 5)) {
-        fprintf(stderr, "the PyTorch twin did not start (a LaMa checkout and /usr/bin/python3 with torch are needed)\n");
-        unlink(save);
-        return 1;
-    }
+    pid_t py;
+    if (twin_start(G3D_SOURCE_DIR "/bench/bench_lama_torch.py", argv[1], args, save, &to, &from, &py)) return 1;
     g3d_lama *m = NULL;
     double t0 = g3d_time_now();
     g3d_status rc = g3d_lama_load_file(save, &m);
@@ -102,9 +54,8 @@ int main(int argc, char **argv)
     for (size_t i = 3 * n; i < 4 * n; i++) x[i] = x[i] > 0.5f;
     /* a first pass of each plans the FFTs and fills the arena; not timed */
     rc = g3d_lama_forward(m, x, size, size, y, NULL, NULL);
-    fprintf(to, "go\n");
-    fflush(to);
-    if (rc != G3D_OK || !fgets(line, sizeof line, from)) {
+    double tt = 0, ct = 0;
+    if (rc != G3D_OK || twin_round(to, from, &tt, &ct)) {
         fprintf(stderr, "warm-up failed: %s\n", rc != G3D_OK ? g3d_error_message() : "no answer from the twin");
         return 1;
     }
@@ -114,10 +65,8 @@ int main(int argc, char **argv)
         t0 = g3d_time_now();
         const double c0 = cpu_seconds();
         if (g3d_lama_forward(m, x, size, size, y, NULL, NULL) != G3D_OK) return 1;
-        double tc = g3d_time_now() - t0, cc = cpu_seconds() - c0, tt = 0, ct = 0;
-        fprintf(to, "go\n");
-        fflush(to);
-        if (!fgets(line, sizeof line, from) || sscanf(line, "torch_seconds %lf %lf", &tt, &ct) != 2) return 1;
+        double tc = g3d_time_now() - t0, cc = cpu_seconds() - c0;
+        if (twin_round(to, from, &tt, &ct)) return 1;
         printf("round %d: gen3d %.3f s (CPU %.3f s), PyTorch %.3f s (CPU %.3f s): %.2fx (CPU %.2fx)\n", k + 1, tc, cc, tt,
                ct, tt / tc, ct / cc);
         fflush(stdout);

@@ -76,9 +76,11 @@ typedef struct g3d_generate_params {
     const g3d_inpainter *inpainter;       /* NULL: LaMa when lama_model is given, else the
                                              classical PatchMatch inpainter */
     const g3d_depth_estimator *depth;     /* NULL: depth_model when given, else depth completion */
-    const g3d_mask_provider *masks;       /* NULL: weight-free region proposals */
+    const g3d_mask_provider *masks;       /* NULL: SAM's automatic masks when seg_model is given,
+                                             else weight-free region proposals */
     const char *depth_model;              /* checkpoint for the depth estimator (recognize.h) */
     const char *lama_model;               /* LaMa checkpoint for the inpainter (lama.h) */
+    const char *seg_model;                /* Segment Anything checkpoint for the layers (sam.h) */
     g3d_depth_model_params depth_model_params;
     /* ---- layers ---- */
     int layers;                       /* 1: split foreground and background (default) */

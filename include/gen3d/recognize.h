@@ -22,6 +22,7 @@ typedef enum g3d_model_kind {
                                     Diffusion checkpoint (cond_stage_model.*) */
     G3D_MODEL_LAMA,              /* LaMa's FFC generator under "generator.model." (a Lightning
                                     checkpoint) or "model." (the generator alone) */
+    G3D_MODEL_SAM,               /* Segment Anything: image_encoder.*, prompt_encoder.*, mask_decoder.* */
     G3D_MODEL_KIND_COUNT
 } g3d_model_kind;
 

@@ -47,6 +47,12 @@ g3d_status g3d_resize_buffer(const float *src, int sw, int sh, int c, float *dst
 /* Resizes src into a new image *dst of dw x dh (same channels). */
 g3d_status g3d_image_resize(const g3d_image *src, int dw, int dh, g3d_resize_mode mode, g3d_image *dst);
 
+/* PIL's Image.resize(..., Image.BILINEAR) of an 8-bit (sh, sw, c) picture into (dh, dw, c) at dst,
+ * pixel for pixel: its antialiasing triangle filter, 22-bit fixed-point weights, rows first
+ * through an 8-bit intermediate (what torchvision's resize does to a PIL image; SAM's
+ * preprocessing). G3D_ERR_ARG for empty or oversized pictures. */
+g3d_status g3d_resize_u8_pil_bilinear(const uint8_t *src, int sw, int sh, int c, uint8_t *dst, int dw, int dh);
+
 #ifdef __cplusplus
 }
 #endif

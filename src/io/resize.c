@@ -159,3 +159,82 @@ g3d_status g3d_image_resize(const g3d_image *src, int dw, int dh, g3d_resize_mod
     if (rc != G3D_OK) g3d_image_free(dst);
     return rc;
 }
+
+/* PIL's resampling coefficients for one axis (Resample.c precompute_coeffs with the bilinear
+ * filter), turned into its 22-bit fixed-point integers. */
+#define PIL_BITS 22
+static g3d_status pil_taps(int in, int out, int *ksize_out, int **bounds_out, int **kk_out)
+{
+    double scale = (double)in / out, fscale = scale < 1.0 ? 1.0 : scale, support = fscale;
+    int ksize = (int)ceil(support) * 2 + 1;
+    int *bounds = malloc(sizeof(int) * 2 * (size_t)out), *kk = malloc(sizeof(int) * (size_t)ksize * out);
+    double *k = malloc(sizeof(double) * (size_t)ksize);
+    if (!bounds || !kk || !k) {
+        free(bounds); free(kk); free(k);
+        return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    }
+    for (int o = 0; o < out; o++) {
+        double center = (o + 0.5) * scale, ww = 0.0, ss = 1.0 / fscale;
+        int xmin = (int)(center - support + 0.5), xmax = (int)(center + support + 0.5);
+        if (xmin < 0) xmin = 0;
+        if (xmax > in) xmax = in;
+        xmax -= xmin;
+        for (int x = 0; x < xmax; x++) {
+            double t = fabs((x + xmin - center + 0.5) * ss);
+            k[x] = t < 1.0 ? 1.0 - t : 0.0;
+            ww += k[x];
+        }
+        for (int x = 0; x < ksize; x++) {
+            double v = x < xmax && ww != 0.0 ? k[x] / ww : 0.0;
+            kk[(size_t)o * ksize + x] = v < 0 ? (int)(-0.5 + v * (1 << PIL_BITS)) : (int)(0.5 + v * (1 << PIL_BITS));
+        }
+        bounds[2 * o] = xmin;
+        bounds[2 * o + 1] = xmax;
+    }
+    free(k);
+    *ksize_out = ksize;
+    *bounds_out = bounds;
+    *kk_out = kk;
+    return G3D_OK;
+}
+
+static uint8_t pil_clip8(int v)
+{
+    v >>= PIL_BITS;
+    return (uint8_t)(v < 0 ? 0 : v > 255 ? 255 : v);
+}
+
+g3d_status g3d_resize_u8_pil_bilinear(const uint8_t *src, int sw, int sh, int c, uint8_t *dst, int dw, int dh)
+{
+    if (sw < 1 || sh < 1 || dw < 1 || dh < 1 || c < 1 || sw > G3D_MAX_IMAGE_SIDE || sh > G3D_MAX_IMAGE_SIDE ||
+        dw > G3D_MAX_IMAGE_SIDE || dh > G3D_MAX_IMAGE_SIDE)
+        return G3D_ERR(G3D_ERR_ARG, "cannot resize %dx%d to %dx%d", sw, sh, dw, dh);
+    int kx, ky, *bx = NULL, *wx = NULL, *by = NULL, *wy = NULL;
+    g3d_status rc = pil_taps(sw, dw, &kx, &bx, &wx);
+    if (rc == G3D_OK) rc = pil_taps(sh, dh, &ky, &by, &wy);
+    /* PIL resizes the rows first (only those the column pass reads), through a uint8 picture. */
+    int y0 = by ? by[0] : 0, y1 = by ? by[2 * dh - 2] + by[2 * dh - 1] : 0;
+    uint8_t *tmp = rc == G3D_OK ? malloc((size_t)dw * (y1 - y0) * c) : NULL;
+    if (rc == G3D_OK && !tmp) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    if (rc == G3D_OK) {
+#pragma omp parallel for schedule(static)
+        for (int y = y0; y < y1; y++)
+            for (int o = 0; o < dw; o++)
+                for (int ch = 0; ch < c; ch++) {
+                    int acc = 1 << (PIL_BITS - 1);
+                    const int *k = wx + (size_t)o * kx;
+                    for (int x = 0; x < bx[2 * o + 1]; x++) acc += src[((size_t)y * sw + bx[2 * o] + x) * c + ch] * k[x];
+                    tmp[((size_t)(y - y0) * dw + o) * c + ch] = pil_clip8(acc);
+                }
+#pragma omp parallel for schedule(static)
+        for (int o = 0; o < dh; o++)
+            for (int x = 0; x < dw * c; x++) {
+                int acc = 1 << (PIL_BITS - 1);
+                const int *k = wy + (size_t)o * ky;
+                for (int y = 0; y < by[2 * o + 1]; y++) acc += tmp[(size_t)(by[2 * o] - y0 + y) * dw * c + x] * k[y];
+                dst[(size_t)o * dw * c + x] = pil_clip8(acc);
+            }
+    }
+    free(tmp); free(bx); free(wx); free(by); free(wy);
+    return rc;
+}

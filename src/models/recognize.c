@@ -23,6 +23,8 @@ g3d_model_kind g3d_model_recognize(const g3d_ckpt *ck)
     if (g3d_clip_text_probe(ck, NULL, &clip) == G3D_OK) return G3D_MODEL_CLIP_TEXT;
     g3d_error_clear();
     if (lama_prefix(ck)) return G3D_MODEL_LAMA;
+    if (g3d_ckpt_find(ck, "image_encoder.patch_embed.proj.weight") && g3d_ckpt_find(ck, "mask_decoder.iou_token.weight"))
+        return G3D_MODEL_SAM;
     return G3D_MODEL_UNKNOWN;
 }
 
@@ -120,6 +122,18 @@ const char *g3d_model_describe(const g3d_ckpt *ck, char *buf, size_t n)
         snprintf(name, sizeof name, "%s1.bn_l.weight", lp);
         snprintf(buf, n, "LaMa (FFC ResNet generator, width %lld, %d residual blocks, %lld of %lld channels global)",
                  dim0(ck, name), blocks, global, local + global);
+        return buf;
+    }
+    const g3d_tensor_info *sp = g3d_ckpt_find(ck, "image_encoder.pos_embed"),
+                          *pw = g3d_ckpt_find(ck, "image_encoder.patch_embed.proj.weight");
+    if (sp && sp->ndim == 4 && pw && pw->ndim == 4 && g3d_ckpt_find(ck, "mask_decoder.iou_token.weight")) {
+        char name[64];
+        int blocks = 0;
+        do snprintf(name, sizeof name, "image_encoder.blocks.%d.norm1.weight", blocks);
+        while (g3d_ckpt_find(ck, name) && ++blocks < 1000);
+        snprintf(buf, n, "Segment Anything (ViT encoder width %lld, %d blocks, input %lld; prompt width %lld)",
+                 (long long)sp->shape[3], blocks, (long long)(sp->shape[1] * pw->shape[2]),
+                 dim0(ck, "image_encoder.neck.0.weight"));
         return buf;
     }
     return NULL;

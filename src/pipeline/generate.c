@@ -9,6 +9,7 @@
 #include "gen3d/ply.h"
 #include "gen3d/raster.h"
 #include "gen3d/regions.h"
+#include "gen3d/sam.h"
 #include "gen3d/spz.h"
 #include "gen3d/viewer.h"
 
@@ -196,7 +197,11 @@ static g3d_status stage_layers(run *r)
     const g3d_generate_params *p = r->p;
     if (!p->layers) return G3D_OK;
     r->masks = p->masks;
-    if (!r->masks) {
+    if (!r->masks && p->seg_model) {
+        G3D_TRY(g3d_mask_provider_sam_create(p->seg_model, NULL, &r->own_masks));
+        g3d_log(G3D_LOG_INFO, "layer masks: Segment Anything (%s)", p->seg_model);
+        r->masks = &r->own_masks;
+    } else if (!r->masks) {
         G3D_TRY(g3d_mask_provider_regions_create(NULL, r->input->cam.K, &r->own_masks));
         r->masks = &r->own_masks;
     }
@@ -418,6 +423,7 @@ static cJSON *config_json(const run *r)
         if (p->layers) cJSON_AddStringToObject(c, "mask_provider", r->masks->name);
         if (p->depth_model && !p->depth) cJSON_AddStringToObject(c, "depth_model", p->depth_model);
         if (p->lama_model && !p->inpainter) cJSON_AddStringToObject(c, "lama_model", p->lama_model);
+        if (p->seg_model && !p->masks) cJSON_AddStringToObject(c, "seg_model", p->seg_model);
     }
     cJSON_AddNumberToObject(c, "iterations", (double)p->train.iterations);
     cJSON_AddNumberToObject(c, "sh_degree", p->sh_degree);

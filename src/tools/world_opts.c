@@ -51,4 +51,5 @@ void g3d_cli_world_apply(const g3d_cli_world *w, g3d_generate_params *p)
     p->input.max_side = w->max_side;
     p->layers = !w->no_layers;
     p->lama_model = w->lama_model;
+    p->seg_model = w->seg_model;
 }

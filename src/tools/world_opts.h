@@ -8,7 +8,7 @@
 
 typedef struct g3d_cli_world {
     const char *trajectory;
-    const char *inpainter, *lama_model;
+    const char *inpainter, *lama_model, *seg_model;
     int steps, extra, max_side, no_layers;
     double angle, distance;
 } g3d_cli_world;
@@ -22,7 +22,8 @@ typedef struct g3d_cli_world {
     {0, "max-side", G3D_OPT_INT, &(w)->max_side, "PX", "downscale the input so that its longer side is at most this"}, \
     {0, "no-layers", G3D_OPT_FLAG, &(w)->no_layers, NULL, "skip the foreground/background split"},            \
     {0, "inpainter", G3D_OPT_STRING, &(w)->inpainter, "NAME", "classic (PatchMatch) or lama (needs --lama-model)"},  \
-    {0, "lama-model", G3D_OPT_PATH, &(w)->lama_model, "CKPT", "LaMa checkpoint (big-lama/models/best.ckpt)"}
+    {0, "lama-model", G3D_OPT_PATH, &(w)->lama_model, "CKPT", "LaMa checkpoint (big-lama/models/best.ckpt)"},       \
+    {0, "seg-model", G3D_OPT_PATH, &(w)->seg_model, "CKPT", "Segment Anything checkpoint: the layers' masks (sam_vit_*.pth)"}
 
 /* The library's defaults (g3d_generate_params_default). */
 void g3d_cli_world_init(g3d_cli_world *w);
