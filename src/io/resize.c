@@ -159,3 +159,89 @@ g3d_status g3d_image_resize(const g3d_image *src, int dw, int dh, g3d_resize_mod
     if (rc != G3D_OK) g3d_image_free(dst);
     return rc;
 }
+
+/* ---- PIL's 8-bit bicubic ---------------------------------------------------------------- */
+#define PIL_PREC 22 /* fractional bits of PIL's fixed-point coefficients (32 - 8 - 2) */
+
+static double pil_cubic(double x)
+{
+    const double a = -0.5;
+    x = fabs(x);
+    if (x < 1.0) return ((a + 2.0) * x - (a + 3.0)) * x * x + 1;
+    if (x < 2.0) return (((x - 5) * x + 8) * x - 4) * a;
+    return 0.0;
+}
+
+/* Per output coordinate: the first source index, the tap count and ksize fixed-point weights. */
+static g3d_status pil_taps(int in, int out, int **first, int **count, int **k, int *ksize)
+{
+    double scale = (double)in / out, fs = scale < 1.0 ? 1.0 : scale, support = 2.0 * fs;
+    *ksize = (int)ceil(support) * 2 + 1;
+    *first = malloc(sizeof(int) * (size_t)out);
+    *count = malloc(sizeof(int) * (size_t)out);
+    *k = malloc(sizeof(int) * (size_t)out * *ksize);
+    double *w = malloc(sizeof(double) * (size_t)*ksize);
+    if (!*first || !*count || !*k || !w) {
+        free(*first); free(*count); free(*k); free(w);
+        return G3D_ERR(G3D_ERR_NOMEM, "resize: out of memory");
+    }
+    for (int o = 0; o < out; o++) {
+        double centre = (o + 0.5) * scale, total = 0;
+        int lo = (int)(centre - support + 0.5), hi = (int)(centre + support + 0.5);
+        lo = lo < 0 ? 0 : lo;
+        hi = hi > in ? in : hi;
+        for (int x = 0; x < hi - lo; x++) total += w[x] = pil_cubic((x + lo - centre + 0.5) / fs);
+        for (int x = 0; x < *ksize; x++) {
+            double v = x < hi - lo && total != 0.0 ? w[x] / total : 0.0;
+            (*k)[(size_t)o * *ksize + x] = (int)(v < 0 ? -0.5 + v * (1 << PIL_PREC) : 0.5 + v * (1 << PIL_PREC));
+        }
+        (*first)[o] = lo;
+        (*count)[o] = hi - lo;
+    }
+    free(w);
+    return G3D_OK;
+}
+
+static unsigned char pil_clip8(int v)
+{
+    if (v >= (1 << PIL_PREC << 8)) return 255;
+    return v <= 0 ? 0 : (unsigned char)(v >> PIL_PREC);
+}
+
+g3d_status g3d_resize_pil_bicubic_u8(const unsigned char *src, int sw, int sh, int c, unsigned char *dst, int dw, int dh)
+{
+    if (sw < 1 || sh < 1 || dw < 1 || dh < 1 || c < 1 || sw > G3D_MAX_IMAGE_SIDE || sh > G3D_MAX_IMAGE_SIDE ||
+        dw > G3D_MAX_IMAGE_SIDE || dh > G3D_MAX_IMAGE_SIDE)
+        return G3D_ERR(G3D_ERR_ARG, "resize: bad sizes %dx%d -> %dx%d", sw, sh, dw, dh);
+    /* PIL skips a pass whose size does not change */
+    int *fx = NULL, *nx = NULL, *kx = NULL, *fy = NULL, *ny = NULL, *ky = NULL, ksx = 0, ksy = 0;
+    unsigned char *mid = malloc((size_t)sh * dw * c);
+    g3d_status rc = mid ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "resize: out of memory");
+    if (rc == G3D_OK && dw != sw) rc = pil_taps(sw, dw, &fx, &nx, &kx, &ksx);
+    if (rc == G3D_OK && dh != sh) rc = pil_taps(sh, dh, &fy, &ny, &ky, &ksy);
+    if (rc == G3D_OK) {
+        if (dw == sw) memcpy(mid, src, (size_t)sh * sw * c);
+        else
+            for (int y = 0; y < sh; y++)
+                for (int x = 0; x < dw; x++)
+                    for (int ch = 0; ch < c; ch++) {
+                        int s = 1 << (PIL_PREC - 1);
+                        for (int t = 0; t < nx[x]; t++)
+                            s += src[((size_t)y * sw + fx[x] + t) * c + ch] * kx[(size_t)x * ksx + t];
+                        mid[((size_t)y * dw + x) * c + ch] = pil_clip8(s);
+                    }
+        if (dh == sh) memcpy(dst, mid, (size_t)sh * dw * c);
+        else
+            for (int y = 0; y < dh; y++)
+                for (int x = 0; x < dw; x++)
+                    for (int ch = 0; ch < c; ch++) {
+                        int s = 1 << (PIL_PREC - 1);
+                        for (int t = 0; t < ny[y]; t++)
+                            s += mid[((size_t)(fy[y] + t) * dw + x) * c + ch] * ky[(size_t)y * ksy + t];
+                        dst[((size_t)y * dw + x) * c + ch] = pil_clip8(s);
+                    }
+    }
+    free(fx); free(nx); free(kx); free(fy); free(ny); free(ky);
+    free(mid);
+    return rc;
+}
