@@ -1,4 +1,4 @@
-/* The whole CLIP model against OpenAI CLIP's model.py (tests/fixtures/make_clip_image_golden.py):
+/* The whole CLIP model against OpenAI CLIP's model.py (tests/fixtures/make_clipvit_golden.py):
  * the preprocessing (PIL's bicubic, torchvision's crop, CLIP's mean and std), the image tower,
  * the pooled and projected text embeddings and the zero-shot logits, in the OpenAI layout
  * (.pt, fp16) and Hugging Face's CLIPModel layout (.safetensors); then refusals. */
@@ -122,7 +122,7 @@ TEST(bad_input)
 
 int main(void)
 {
-    CHECK_OK(g3d_ckpt_open(test_fixture("clip_vit_tiny_golden.safetensors"), &g_act));
+    CHECK_OK(g3d_ckpt_open(test_fixture("clipvit_tiny_golden.safetensors"), &g_act));
     CHECK_OK(g3d_clip_tokenizer_load(test_fixture("cliptok_merges.txt.gz"), &g_tok));
     if (g_act && g_tok) {
         RUN(preprocess);

@@ -264,16 +264,11 @@ const char *g3d_clip_describe(const g3d_clip *m, char *buf, size_t n)
     return buf;
 }
 
-g3d_status g3d_clip_preprocess(const g3d_image *img, int size, float *out)
+g3d_status g3d_clip_pixels(const g3d_image *img, int rw, int rh, int size, float *out)
 {
-    if (img->c != 3 && img->c != 1) return G3D_ERR(G3D_ERR_ARG, "CLIP needs an RGB or grey image (%d channels given)", img->c);
-    int w = img->w, h = img->h, shortside = w < h ? w : h, longside = w < h ? h : w;
-    if (shortside < G3D_CLIP_MIN_SIDE)
-        return G3D_ERR(G3D_ERR_ARG, "the image is %dx%d: at least %d pixels on the short side are needed", w, h, G3D_CLIP_MIN_SIDE);
-    int nl = (int)((double)size * longside / shortside);
-    int rw = w <= h ? size : nl, rh = w <= h ? nl : size;
+    int w = img->w, h = img->h;
     unsigned char *u = malloc((size_t)w * h * 3), *r = malloc((size_t)rw * rh * 3);
-    g3d_status rc = u && r ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory preprocessing for CLIP");
+    g3d_status rc = u && r ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory preprocessing an image");
     for (size_t i = 0; rc == G3D_OK && i < (size_t)w * h; i++)
         for (int ch = 0; ch < 3; ch++) {
             float v = img->data[i * img->c + (img->c == 3 ? ch : 0)] * 255.0f;
@@ -292,6 +287,16 @@ g3d_status g3d_clip_preprocess(const g3d_image *img, int size, float *out)
     free(u);
     free(r);
     return rc;
+}
+
+g3d_status g3d_clip_preprocess(const g3d_image *img, int size, float *out)
+{
+    if (img->c != 3 && img->c != 1) return G3D_ERR(G3D_ERR_ARG, "CLIP needs an RGB or grey image (%d channels given)", img->c);
+    int w = img->w, h = img->h, shortside = w < h ? w : h, longside = w < h ? h : w;
+    if (shortside < G3D_CLIP_MIN_SIDE)
+        return G3D_ERR(G3D_ERR_ARG, "the image is %dx%d: at least %d pixels on the short side are needed", w, h, G3D_CLIP_MIN_SIDE);
+    int nl = (int)((double)size * longside / shortside);
+    return g3d_clip_pixels(img, w <= h ? size : nl, w <= h ? nl : size, size, out);
 }
 
 g3d_status g3d_clip_encode_pixels(const g3d_clip *m, const float *pixels, float *embed, float *class_token)

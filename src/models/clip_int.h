@@ -4,6 +4,7 @@
 #define G3D_CLIP_INT_H
 
 #include "gen3d/ckpt.h"
+#include "gen3d/image.h"
 #include "gen3d/nn.h"
 
 typedef struct g3d_clip_block {
@@ -27,6 +28,15 @@ typedef struct g3d_clip_scratch {
 const g3d_tensor_info *g3d_clip_findf(const g3d_ckpt *ck, const char *prefix, const char *fmt, ...);
 /* Reads <prefix><printf name> of shape [d0] (d1 = 0) or [d0, d1] as float32 (malloc'd). */
 g3d_status g3d_clip_readf(const g3d_ckpt *ck, const char *prefix, float **dst, int64_t d0, int64_t d1, const char *fmt, ...);
+
+/* A Linear layer [out, in] from `parts` weights stacked along out (1, or 3 for separate q, k,
+ * v) named prefix + w[p] / prefix + b[p]; 16-bit weights stay 16-bit in the packed panels. */
+g3d_status g3d_clip_lin(const g3d_ckpt *ck, const char *prefix, g3d_nn_lin *L, int out, int in, int parts,
+                        const char *const *w, const char *const *b);
+/* An RGB or grey image with values in [0, 1] to 8 bits, resized to rw x rh with PIL's bicubic,
+ * its centre size x size crop (torchvision's offsets) normalised with CLIP's mean and std
+ * into out[3, size, size]. */
+g3d_status g3d_clip_pixels(const g3d_image *img, int rw, int rh, int size, float *out);
 
 /* Loads the block whose tensors start with `base` (e.g. "visual.transformer.resblocks.3." or
  * "vision_model.encoder.layers.3."); hf picks Hugging Face's names (separate q, k, v). */

@@ -57,8 +57,7 @@ g3d_status g3d_clip_readf(const g3d_ckpt *ck, const char *prefix, float **dst, i
     return g3d_ckpt_read_alloc(ck, full, d1 ? 2 : 1, shape, dst);
 }
 
-/* A Linear layer [out, in] from one or (Hugging Face's q, k, v) three stacked weights. */
-static g3d_status lin(const g3d_ckpt *ck, const char *prefix, g3d_nn_lin *L, int out, int in, int parts, const char *const *w,
+g3d_status g3d_clip_lin(const g3d_ckpt *ck, const char *prefix, g3d_nn_lin *L, int out, int in, int parts, const char *const *w,
                       const char *const *b)
 {
     float *W = NULL, *B = NULL;
@@ -200,7 +199,7 @@ g3d_status g3d_clip_block_load(const g3d_ckpt *ck, int hf, const char *base, int
         snprintf(ln[0], sizeof ln[0], "%sln_1.", base);
         snprintf(ln[1], sizeof ln[1], "%sln_2.", base);
     }
-    G3D_TRY(lin(ck, "", &b->qkv, 3 * D, D, hf ? 3 : 1, wp, bp));
+    G3D_TRY(g3d_clip_lin(ck, "", &b->qkv, 3 * D, D, hf ? 3 : 1, wp, bp));
     G3D_TRY(g3d_clip_readf(ck, "", &b->ln1w, D, 0, "%sweight", ln[0]));
     G3D_TRY(g3d_clip_readf(ck, "", &b->ln1b, D, 0, "%sbias", ln[0]));
     G3D_TRY(g3d_clip_readf(ck, "", &b->ln2w, D, 0, "%sweight", ln[1]));
@@ -212,7 +211,7 @@ g3d_status g3d_clip_block_load(const g3d_ckpt *ck, int hf, const char *base, int
     for (int k = 0; k < 3; k++) {
         snprintf(w[0], sizeof w[0], "%s%s.weight", base, hf ? hfn[k] : ocn[k]);
         snprintf(bs[0], sizeof bs[0], "%s%s.bias", base, hf ? hfn[k] : ocn[k]);
-        G3D_TRY(lin(ck, "", L[k], dims[k][0], dims[k][1], 1, wp, bp));
+        G3D_TRY(g3d_clip_lin(ck, "", L[k], dims[k][0], dims[k][1], 1, wp, bp));
     }
     return G3D_OK;
 }
