@@ -1,6 +1,6 @@
 #!/bin/sh
 # gen3d describe: category, colours and template as text and JSON with the tiny CLIP fixture,
-# colours alone, a foreground mask, a category file, and the refusals.
+# colours alone, foreground masks, a category file, BLIP captions, and the refusals.
 set -u
 T="$G3D_TEST_TMP/cli_describe"
 . "$G3D_SOURCE_DIR/tests/cli_lib.sh"
@@ -37,6 +37,16 @@ expect 1 "a text encoder as CLIP" "$GEN3D" describe -q --clip "$FIX/clip_sd2_tin
 grep -q "clip_sd2_tiny.safetensors: not a CLIP model" "$T/err" && ok "named" || bad "$(cat "$T/err")"
 expect 1 "image too small" "$GEN3D" describe -q --clip "$FIX/clip_vit_tiny.pt" --tokenizer "$TOK" -i "$FIX/jpeg_grey_23x17.png" -o "$T/small.json"
 [ "$(wc -l < "$T/err")" = 1 ] && grep -q "23x17" "$T/err" && [ ! -e "$T/small.json" ] && ok "one line, no output" || bad "$(cat "$T/err")"
+# captions: the golden's beam search and greedy ids, decoded; the wrong model kinds
+expect 0 "caption, beam search" "$GEN3D" describe -q -i "$IMG" --caption-model "$FIX/blip_tiny" --json
+grep -q '"caption":[[:space:]]*" y"' "$T/out" && ok "caption of the golden's beam ids" || bad "caption: $(cat "$T/out")"
+expect 0 "caption, greedy" "$GEN3D" describe -q -i "$IMG" --caption-model "$FIX/blip_tiny_hf" --beams 1
+grep -q "^caption:  y trees y white street" "$T/out" && ok "caption of the golden's greedy ids" || bad "caption: $(cat "$T/out")"
+expect 1 "CLIP given as the caption model" "$GEN3D" describe -q -i "$IMG" --caption-model "$FIX/clip_vit_tiny.pt"
+[ "$(wc -l < "$T/err")" = 1 ] && grep -q "a CLIP model, not a BLIP captioner" "$T/err" && ok "said in one line" || bad "$(cat "$T/err")"
+expect 1 "BLIP given as the CLIP model" "$GEN3D" describe -q -i "$IMG" --clip "$FIX/blip_tiny/model.pth" --tokenizer "$TOK"
+[ "$(wc -l < "$T/err")" = 1 ] && grep -q "a BLIP checkpoint, not a CLIP model" "$T/err" && ok "said in one line" || bad "$(cat "$T/err")"
+expect 2 "bad --beams" "$GEN3D" describe -q -i "$IMG" --beams 0
 expect 2 "no image" "$GEN3D" describe -q
 expect 2 "bad --top" "$GEN3D" describe -q -i "$IMG" --top 0
 finish
