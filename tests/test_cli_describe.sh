@@ -47,6 +47,21 @@ expect 1 "CLIP given as the caption model" "$GEN3D" describe -q -i "$IMG" --capt
 expect 1 "BLIP given as the CLIP model" "$GEN3D" describe -q -i "$IMG" --clip "$FIX/blip_tiny/model.pth" --tokenizer "$TOK"
 [ "$(wc -l < "$T/err")" = 1 ] && grep -q "a BLIP checkpoint, not a CLIP model" "$T/err" && ok "said in one line" || bad "$(cat "$T/err")"
 expect 2 "bad --beams" "$GEN3D" describe -q -i "$IMG" --beams 0
+# gen3d generate with automatic prompts: computed once, recorded in config.json. A CLIP folder
+# in Hugging Face's layout carries its own vocabulary (vocab.json + merges.txt).
+need_default_input
+mkdir -p "$T/clip"
+cp "$FIX/clip_vit_tiny_hf.safetensors" "$T/clip/model.safetensors"
+cp "$FIX/cliptok_vocab.json" "$T/clip/vocab.json"
+cp "$FIX/cliptok_merges.txt" "$T/clip/merges.txt"
+G="generate --default-input $MB --max-side 96 --steps 2 --extra 1 --iters 10 --sh-degree 0 --no-video -t 2"
+expect 0 "generate with --clip and --caption-model" "$GEN3D" $G --clip "$T/clip" --caption-model "$FIX/blip_tiny" -o "$T/gen"
+grep -q '"prompt_provider":[[:space:]]*"clip+blip"' "$T/gen/config.json" &&
+    grep -q '"background_prompt":[[:space:]]*"high-resolution [a-z ]* background with [a-z ,]* colors, photorealistic, 8K"' "$T/gen/config.json" &&
+    grep -q '"view_prompt":' "$T/gen/config.json" && ok "prompts recorded in config.json" || bad "config: $(cat "$T/gen/config.json")"
+expect 1 "generate: CLIP as the caption model" "$GEN3D" $G --caption-model "$T/clip" -o "$T/gen_bad"
+grep -q "a CLIP model, not a BLIP captioner" "$T/err" && [ ! -e "$T/gen_bad" ] && ok "refused before any output" || bad "$(cat "$T/err")"
+expect 2 "--world with --clip" "$GEN3D" generate --world "$T/gen/dataset" --clip "$T/clip" -o "$T/gen_w"
 expect 2 "no image" "$GEN3D" describe -q
 expect 2 "bad --top" "$GEN3D" describe -q -i "$IMG" --top 0
 finish

@@ -10,7 +10,9 @@
 #ifndef G3D_DESCRIBE_H
 #define G3D_DESCRIBE_H
 
+#include "gen3d/blip.h"
 #include "gen3d/clip.h"
+#include "gen3d/providers.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -76,6 +78,18 @@ struct cJSON *g3d_description_json(const g3d_description *d);
 g3d_status g3d_describe_scene(const g3d_clip *clip, const g3d_clip_tokenizer *tok, const g3d_image *rgb,
                               const g3d_image *exclude, const char *const *labels, int n, int top_k, uint64_t seed,
                               g3d_description *out);
+
+/* The tokenizer for a CLIP model: `tokenizer` when given, else the model folder's own
+ * (vocab.json + merges.txt), else OpenAI's default vocabulary (g3d_clip_default_vocab). */
+g3d_status g3d_describe_tokenizer_load(const char *clip_model, const char *tokenizer, g3d_clip_tokenizer **out);
+
+/* The prompt provider of automatic prompts: background = the template filled with the top
+ * scene category (CLIP at clip_model; "scene" when NULL) and the dominant colours of the
+ * pixels outside the foreground (k-means seeded with seed); view = BLIP's caption of the
+ * image (beam search, BLIP's settings) when caption_model is given, else NULL. tokenizer as
+ * g3d_describe_tokenizer_load. Free with g3d_prompt_provider_free. */
+g3d_status g3d_prompt_provider_describe_create(const char *clip_model, const char *tokenizer, const char *caption_model,
+                                               uint64_t seed, g3d_prompt_provider *out);
 
 #ifdef __cplusplus
 }

@@ -79,6 +79,10 @@ typedef struct g3d_generate_params {
     const g3d_mask_provider *masks;       /* NULL: weight-free region proposals */
     const char *depth_model;              /* checkpoint for the depth estimator (recognize.h) */
     const char *lama_model;               /* LaMa checkpoint for the inpainter (lama.h) */
+    const g3d_prompt_provider *prompts;   /* NULL: automatic prompts (describe.h) when clip_model
+                                             or caption_model is given, else no prompts */
+    const char *clip_model;               /* CLIP model: the background prompt's scene category */
+    const char *caption_model;            /* BLIP captioner: the views' prompt */
     g3d_depth_model_params depth_model_params;
     /* ---- layers ---- */
     int layers;                       /* 1: split foreground and background (default) */

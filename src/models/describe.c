@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 /* Scene types a photograph or a rendered view is likely to show, indoors and outdoors. */
 static const char *const CATEGORIES[] = {
@@ -376,4 +377,72 @@ g3d_status g3d_describe_scene(const g3d_clip *clip, const g3d_clip_tokenizer *to
     }
     if (rc != G3D_OK) g3d_description_free(out);
     return rc;
+}
+
+g3d_status g3d_describe_tokenizer_load(const char *clip_model, const char *tokenizer, g3d_clip_tokenizer **out)
+{
+    struct stat st;
+    char *v = !tokenizer && clip_model && stat(clip_model, &st) == 0 && S_ISDIR(st.st_mode) ? g3d_path_join(clip_model, "vocab.json")
+                                                                                             : NULL;
+    int own = v && stat(v, &st) == 0;
+    free(v);
+    return g3d_clip_tokenizer_load(tokenizer ? tokenizer : own ? clip_model : NULL, out);
+}
+
+typedef struct describer {
+    g3d_clip *clip;
+    g3d_clip_tokenizer *tok;
+    g3d_blip *blip;
+    uint64_t seed;
+} describer;
+
+static void describer_free(void *ctx)
+{
+    describer *d = ctx;
+    g3d_clip_free(d->clip);
+    g3d_clip_tokenizer_free(d->tok);
+    g3d_blip_free(d->blip);
+    free(d);
+}
+
+static g3d_status describer_prompt(void *ctx, const g3d_image *rgb, const g3d_image *exclude, char **background, char **view)
+{
+    describer *dd = ctx;
+    g3d_description d;
+    *background = *view = NULL;
+    G3D_TRY(g3d_describe_scene(dd->clip, dd->tok, rgb, exclude, NULL, 0, 1, dd->seed, &d));
+    if (d.ncat) g3d_log(G3D_LOG_INFO, "scene category: %s (%.3f)", d.category[0], d.prob[0]);
+    *background = d.background_prompt;
+    d.background_prompt = NULL;
+    g3d_description_free(&d);
+    g3d_status rc = G3D_OK;
+    if (dd->blip) {
+        g3d_blip_gen g;
+        g3d_blip_gen_default(&g);
+        rc = g3d_blip_caption(dd->blip, rgb, &g, view);
+    }
+    if (rc != G3D_OK) {
+        free(*background);
+        *background = NULL;
+    }
+    return rc;
+}
+
+g3d_status g3d_prompt_provider_describe_create(const char *clip_model, const char *tokenizer, const char *caption_model,
+                                               uint64_t seed, g3d_prompt_provider *out)
+{
+    memset(out, 0, sizeof *out);
+    describer *d = calloc(1, sizeof *d);
+    if (!d) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    d->seed = seed;
+    g3d_status rc = clip_model ? g3d_clip_load(clip_model, &d->clip) : G3D_OK;
+    if (rc == G3D_OK && clip_model) rc = g3d_describe_tokenizer_load(clip_model, tokenizer, &d->tok);
+    if (rc == G3D_OK && caption_model) rc = g3d_blip_load(caption_model, &d->blip);
+    if (rc != G3D_OK) {
+        describer_free(d);
+        return rc;
+    }
+    *out = (g3d_prompt_provider){.name = d->blip ? (d->clip ? "clip+blip" : "colours+blip") : d->clip ? "clip" : "colours",
+                                 .ctx = d, .prompt = describer_prompt, .free = describer_free};
+    return G3D_OK;
 }

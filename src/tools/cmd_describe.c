@@ -10,7 +10,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 
 static const char *DESCRIPTION =
     "Prints what gen3d generate writes into its prompts when the input has no text: the scene\n"
@@ -24,15 +23,6 @@ static const char *DESCRIPTION =
     "--caption-model adds a BLIP caption (a folder with Salesforce's model_base_capfilt_large.pth or\n"
     "Hugging Face's BlipForConditionalGeneration weights, and vocab.txt): beam search with 3 beams\n"
     "after \"a picture of \", as BLIP's own captioning runs; --beams 1 is greedy. docs/describe.md.";
-
-static int has_vocab(const char *dir)
-{
-    struct stat st;
-    char *v = dir && stat(dir, &st) == 0 && S_ISDIR(st.st_mode) ? g3d_path_join(dir, "vocab.json") : NULL;
-    int ok = v && stat(v, &st) == 0;
-    free(v);
-    return ok;
-}
 
 static void print_text(const g3d_description *d, const char *caption)
 {
@@ -98,7 +88,7 @@ static int run(int argc, char **argv)
     if (rc == G3D_OK && clip_path) {
         g3d_log(G3D_LOG_INFO, "loading CLIP from %s", clip_path);
         rc = g3d_clip_load(clip_path, &clip);
-        if (rc == G3D_OK) rc = g3d_clip_tokenizer_load(tokenizer ? tokenizer : has_vocab(clip_path) ? clip_path : NULL, &tok);
+        if (rc == G3D_OK) rc = g3d_describe_tokenizer_load(clip_path, tokenizer, &tok);
     }
     if (rc == G3D_OK && blip_path) {
         g3d_log(G3D_LOG_INFO, "loading BLIP from %s", blip_path);
