@@ -3,9 +3,9 @@
  *
  * The world loop only sees these tables. Implementations: classical weight-free ones
  * (src/classic: inpaint_classic.h, depth_complete.h, regions.h), and neural ones (src/models:
- * g3d_inpainter_lama_create in lama.h, depth_estimators.h), chosen once per run (g3d_generate,
- * generate.h) from its parameters or passed in by the caller. Every implementation is
- * deterministic for a given seed.
+ * g3d_inpainter_lama_create in lama.h, depth_estimators.h; the prompts of describe.h), chosen
+ * once per run (g3d_generate, generate.h) from its parameters or passed in by the caller.
+ * Every implementation is deterministic for a given seed.
  *
  * LIFETIME
  *   An implementation is made by g3d_<kind>_<impl>_create(..., &table) (e.g.
