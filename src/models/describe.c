@@ -154,6 +154,18 @@ const char *g3d_color_name(const float lab[3])
     return best;
 }
 
+/* order[n] = the indices of key[n] by decreasing value; equal values keep their order. */
+static void order_desc(const float *key, int n, int *order)
+{
+    for (int i = 0; i < n; i++) order[i] = i;
+    for (int a = 1; a < n; a++)
+        for (int b = a; b > 0 && key[order[b]] > key[order[b - 1]]; b--) {
+            int t = order[b];
+            order[b] = order[b - 1];
+            order[b - 1] = t;
+        }
+}
+
 static double dist2(const float *a, const float *b)
 {
     double d = 0;
@@ -248,13 +260,9 @@ g3d_status g3d_dominant_colors(const g3d_image *rgb, const g3d_image *exclude, i
     }
     /* by decreasing share; ties keep the seeding order */
     int order[G3D_MAX_COLORS];
-    for (int c = 0; c < k; c++) order[c] = c;
-    for (int a = 1; a < k; a++)
-        for (int b = a; b > 0 && count[order[b]] > count[order[b - 1]]; b--) {
-            int t = order[b];
-            order[b] = order[b - 1];
-            order[b - 1] = t;
-        }
+    float share[G3D_MAX_COLORS];
+    for (int c = 0; c < k; c++) share[c] = (float)count[c];
+    order_desc(share, k, order);
     for (int i = 0; i < k && count[order[i]]; i++) {
         g3d_color *o = &out[(*nout)++];
         memcpy(o->lab, cen + 3 * order[i], sizeof o->lab);
@@ -305,14 +313,7 @@ static g3d_status classify(const g3d_clip *clip, const g3d_clip_tokenizer *tok, 
         if (!out->category || !out->prob) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
     }
     if (rc == G3D_OK) {
-        /* stable: equal probabilities keep the list's order */
-        for (int i = 0; i < n; i++) order[i] = i;
-        for (int a = 1; a < n; a++)
-            for (int b = a; b > 0 && probs[order[b]] > probs[order[b - 1]]; b--) {
-                int t = order[b];
-                order[b] = order[b - 1];
-                order[b - 1] = t;
-            }
+        order_desc(probs, n, order);
         for (int i = 0; i < top_k && rc == G3D_OK; i++) {
             out->category[i] = strdup(labels[order[i]]);
             out->prob[i] = probs[order[i]];
