@@ -47,6 +47,11 @@ expect 1 "CLIP given as the caption model" "$GEN3D" describe -q -i "$IMG" --capt
 expect 1 "BLIP given as the CLIP model" "$GEN3D" describe -q -i "$IMG" --clip "$FIX/blip_tiny/model.pth" --tokenizer "$TOK"
 [ "$(wc -l < "$T/err")" = 1 ] && grep -q "a BLIP checkpoint, not a CLIP model" "$T/err" && ok "said in one line" || bad "$(cat "$T/err")"
 expect 2 "bad --beams" "$GEN3D" describe -q -i "$IMG" --beams 0
+expect 0 "info on a CLIP model" "$GEN3D" info "$FIX/clip_vit_tiny_hf.safetensors"
+grep -q "CLIP model (image tower: 32 px, patch 8, width 64, 2 layers; embedding 32" "$T/out" && ok "named" || bad "$(head -1 "$T/out")"
+expect 0 "info on a BLIP captioner" "$GEN3D" info "$FIX/blip_tiny/model.pth"
+grep -q "BLIP captioner (Salesforce layout: ViT 32 px" "$T/out" && ok "named" || bad "$(head -1 "$T/out")"
+
 # gen3d generate with automatic prompts: computed once, recorded in config.json. A CLIP folder
 # in Hugging Face's layout carries its own vocabulary (vocab.json + merges.txt).
 need_default_input

@@ -20,6 +20,7 @@
 #define G3D_BLIP_H
 
 #include "gen3d/base.h"
+#include "gen3d/ckpt.h"
 #include "gen3d/image.h"
 
 #include <stdint.h>
@@ -46,6 +47,9 @@ typedef struct g3d_blip_config {
  * and vocab.txt, or a weights file with vocab.txt beside it. A CLIP model is refused as such;
  * other files name the first missing tensor. */
 g3d_status g3d_blip_load(const char *path, g3d_blip **out);
+/* The configuration read from an open checkpoint's tensors alone (no vocabulary: bos, eos and
+ * pad are 0), without loading weights; the same refusals as loading. */
+g3d_status g3d_blip_probe(const g3d_ckpt *ck, g3d_blip_config *c);
 void g3d_blip_free(g3d_blip *m);
 const g3d_blip_config *g3d_blip_get_config(const g3d_blip *m);
 /* A one-line description into buf. */

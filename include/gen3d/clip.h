@@ -50,6 +50,9 @@ typedef struct g3d_clip_config {
  * either layout. A file without an image tower is refused naming the first missing tensor (a
  * BLIP captioning checkpoint is named as such). Free with g3d_clip_free. */
 g3d_status g3d_clip_load(const char *path, g3d_clip **out);
+/* The image tower's configuration read from an open checkpoint's tensors alone (activation
+ * quick_gelu), without loading weights; the same refusals as loading. */
+g3d_status g3d_clip_probe(const g3d_ckpt *ck, g3d_clip_config *c);
 void g3d_clip_free(g3d_clip *m);
 const g3d_clip_config *g3d_clip_get_config(const g3d_clip *m);
 /* The text tower (owned by the model). */

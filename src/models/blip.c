@@ -357,6 +357,8 @@ g3d_status g3d_blip_load(const char *path, g3d_blip **out)
     return G3D_OK;
 }
 
+g3d_status g3d_blip_probe(const g3d_ckpt *ck, g3d_blip_config *c) { return probe(ck, NULL, c); }
+
 const g3d_blip_config *g3d_blip_get_config(const g3d_blip *m) { return &m->cfg; }
 int g3d_blip_image_tokens(const g3d_blip *m)
 {

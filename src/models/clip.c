@@ -249,6 +249,8 @@ g3d_status g3d_clip_load(const char *path, g3d_clip **out)
     return G3D_OK;
 }
 
+g3d_status g3d_clip_probe(const g3d_ckpt *ck, g3d_clip_config *c) { return probe(ck, NULL, -1, c); }
+
 const g3d_clip_config *g3d_clip_get_config(const g3d_clip *m) { return &m->cfg; }
 const g3d_clip_text *g3d_clip_get_text(const g3d_clip *m) { return m->text; }
 
