@@ -440,48 +440,77 @@ static g3d_status cross_make(const g3d_blip *m, const float *embeds, cross_kv *x
     return rc;
 }
 
-static g3d_status next_logits(const g3d_blip *m, const cross_kv *x, const int32_t *ids, int n, float *logits)
+/* A sequence's self-attention keys and values so far (transformers' past_key_values):
+ * kv + (layer * cap + i) * 2 width holds position i's key, then its value. */
+typedef struct self_kv {
+    float *kv;
+    int len, cap, layers, width;
+} self_kv;
+
+static g3d_status self_make(const g3d_blip *m, int cap, self_kv *c)
+{
+    *c = (self_kv){.cap = cap, .layers = m->cfg.layers, .width = m->cfg.width};
+    c->kv = malloc(sizeof(float) * (size_t)c->layers * cap * 2 * c->width);
+    return c->kv ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory in BLIP");
+}
+
+/* dst = src (the first src->len positions). */
+static void self_copy(self_kv *dst, const self_kv *src)
+{
+    size_t row = 2 * (size_t)src->width;
+    for (int l = 0; l < src->layers; l++)
+        memcpy(dst->kv + (size_t)l * dst->cap * row, src->kv + (size_t)l * src->cap * row, sizeof(float) * row * src->len);
+    dst->len = src->len;
+}
+
+/* logits[vocab] for the token after ids[n]: the positions past cache->len run through the
+ * decoder (appending their keys and values to the cache), attending to the cached ones. */
+static g3d_status next_logits(const g3d_blip *m, const cross_kv *x, self_kv *cache, const int32_t *ids, int n, float *logits)
 {
     const g3d_blip_config *c = &m->cfg;
-    int D = c->width, hd = HEAD_DIM, heads = D / HEAD_DIM;
-    if (n < 1 || n > c->positions) return G3D_ERR(G3D_ERR_ARG, "%d tokens: 1 to %d expected", n, c->positions);
-    for (int i = 0; i < n; i++)
+    int D = c->width, hd = HEAD_DIM, heads = D / HEAD_DIM, p0 = cache->len, k = n - p0;
+    if (n < 1 || n > c->positions || n > cache->cap || k < 1)
+        return G3D_ERR(G3D_ERR_ARG, "%d tokens after %d: 1 to %d in all expected", k, p0, c->positions);
+    for (int i = p0; i < n; i++)
         if (ids[i] < 0 || ids[i] >= c->vocab) return G3D_ERR(G3D_ERR_ARG, "token id %d outside the vocabulary (%d)", ids[i], c->vocab);
-    size_t nd = (size_t)n * D;
+    size_t nd = (size_t)k * D;
     float *X = malloc(sizeof(float) * nd), *Q = malloc(sizeof(float) * 3 * nd), *A = malloc(sizeof(float) * nd);
-    float *H = malloc(sizeof(float) * (size_t)n * c->mlp), *t = malloc(sizeof(float) * D);
+    float *H = malloc(sizeof(float) * (size_t)k * c->mlp), *t = malloc(sizeof(float) * D);
     g3d_status rc = X && Q && A && H && t ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory in BLIP");
     if (rc == G3D_OK) {
         size_t es = g3d_dtype_size(m->words->dtype);
-        for (int i = 0; i < n; i++) {
-            g3d_dtype_to_f32(m->words->dtype, (const char *)m->words->data + (size_t)ids[i] * D * es, X + (size_t)i * D, D);
-            g3d_nn_add(X + (size_t)i * D, m->tpos + (size_t)i * D, (size_t)D);
+        for (int i = 0; i < k; i++) {
+            g3d_dtype_to_f32(m->words->dtype, (const char *)m->words->data + (size_t)ids[p0 + i] * D * es, X + (size_t)i * D, D);
+            g3d_nn_add(X + (size_t)i * D, m->tpos + (size_t)(p0 + i) * D, (size_t)D);
         }
-        g3d_nn_layernorm(X, n, D, m->elnw, m->elnb, c->eps, X);
+        g3d_nn_layernorm(X, k, D, m->elnw, m->elnb, c->eps, X);
     }
     for (int l = 0; rc == G3D_OK && l < c->layers; l++) {
         const bert_layer *L = &m->layers[l];
+        float *kv = cache->kv + (size_t)l * cache->cap * 2 * D;
         g3d_nn_epi res = {.res = X};
         /* post-norm: X = LN(X + sublayer(X)) */
-        rc = g3d_nn_lin_forward(&L->qkv, X, n, 0, Q, 0, NULL);
-        g3d_nn_attn a = {.nq = n, .nk = n, .heads = heads, .hd = hd, .q = Q, .k = Q + D, .v = Q + 2 * D, .ldq = 3 * D,
-                         .ldk = 3 * D, .ldv = 3 * D, .out = A, .scale = 1.0f / sqrtf((float)hd), .causal = 1};
+        rc = g3d_nn_lin_forward(&L->qkv, X, k, 0, Q, 0, NULL);
+        for (int i = 0; rc == G3D_OK && i < k; i++) memcpy(kv + (size_t)(p0 + i) * 2 * D, Q + (size_t)i * 3 * D + D, sizeof(float) * 2 * D);
+        g3d_nn_attn a = {.nq = k, .nk = n, .heads = heads, .hd = hd, .q = Q, .k = kv, .v = kv + D, .ldq = 3 * D,
+                         .ldk = 2 * D, .ldv = 2 * D, .out = A, .scale = 1.0f / sqrtf((float)hd), .causal = 1};
         if (rc == G3D_OK) rc = g3d_nn_attend(&a);
-        if (rc == G3D_OK) rc = g3d_nn_lin_forward(&L->out, A, n, 0, X, 0, &res);
-        if (rc == G3D_OK) g3d_nn_layernorm(X, n, D, L->ln1w, L->ln1b, c->eps, X);
-        if (rc == G3D_OK) rc = g3d_nn_lin_forward(&L->cq, X, n, 0, Q, 0, NULL);
-        g3d_nn_attn ca = {.nq = n, .nk = x->tokens, .heads = heads, .hd = hd, .q = Q, .k = x->kv[l], .v = x->kv[l] + D,
+        if (rc == G3D_OK) rc = g3d_nn_lin_forward(&L->out, A, k, 0, X, 0, &res);
+        if (rc == G3D_OK) g3d_nn_layernorm(X, k, D, L->ln1w, L->ln1b, c->eps, X);
+        if (rc == G3D_OK) rc = g3d_nn_lin_forward(&L->cq, X, k, 0, Q, 0, NULL);
+        g3d_nn_attn ca = {.nq = k, .nk = x->tokens, .heads = heads, .hd = hd, .q = Q, .k = x->kv[l], .v = x->kv[l] + D,
                           .ldk = 2 * D, .ldv = 2 * D, .out = A, .scale = 1.0f / sqrtf((float)hd)};
         if (rc == G3D_OK) rc = g3d_nn_attend(&ca);
-        if (rc == G3D_OK) rc = g3d_nn_lin_forward(&L->cout, A, n, 0, X, 0, &res);
-        if (rc == G3D_OK) g3d_nn_layernorm(X, n, D, L->ln2w, L->ln2b, c->eps, X);
+        if (rc == G3D_OK) rc = g3d_nn_lin_forward(&L->cout, A, k, 0, X, 0, &res);
+        if (rc == G3D_OK) g3d_nn_layernorm(X, k, D, L->ln2w, L->ln2b, c->eps, X);
         g3d_nn_epi act = {.act = G3D_ACT_GELU};
-        if (rc == G3D_OK) rc = g3d_nn_lin_forward(&L->inter, X, n, 0, H, 0, &act);
-        if (rc == G3D_OK) rc = g3d_nn_lin_forward(&L->fout, H, n, 0, X, 0, &res);
-        if (rc == G3D_OK) g3d_nn_layernorm(X, n, D, L->ln3w, L->ln3b, c->eps, X);
+        if (rc == G3D_OK) rc = g3d_nn_lin_forward(&L->inter, X, k, 0, H, 0, &act);
+        if (rc == G3D_OK) rc = g3d_nn_lin_forward(&L->fout, H, k, 0, X, 0, &res);
+        if (rc == G3D_OK) g3d_nn_layernorm(X, k, D, L->ln3w, L->ln3b, c->eps, X);
     }
+    if (rc == G3D_OK) cache->len = n;
     g3d_nn_epi act = {.act = G3D_ACT_GELU};
-    if (rc == G3D_OK) rc = g3d_nn_lin_forward(&m->head, X + (size_t)(n - 1) * D, 1, 0, t, 0, &act);
+    if (rc == G3D_OK) rc = g3d_nn_lin_forward(&m->head, X + (size_t)(k - 1) * D, 1, 0, t, 0, &act);
     if (rc == G3D_OK) {
         g3d_nn_layernorm(t, 1, D, m->hlnw, m->hlnb, c->eps, t);
         rc = g3d_nn_lin_forward(&m->lm, t, 1, 0, logits, 0, NULL);
@@ -497,8 +526,11 @@ static g3d_status next_logits(const g3d_blip *m, const cross_kv *x, const int32_
 g3d_status g3d_blip_next_logits(const g3d_blip *m, const float *embeds, const int32_t *ids, int n, float *logits)
 {
     cross_kv x = {0};
+    self_kv cache = {0};
     G3D_TRY(cross_make(m, embeds, &x));
-    g3d_status rc = next_logits(m, &x, ids, n, logits);
+    g3d_status rc = self_make(m, n > 0 ? n : 1, &cache);
+    if (rc == G3D_OK) rc = next_logits(m, &x, &cache, ids, n, logits);
+    free(cache.kv);
     cross_free(&x);
     return rc;
 }
@@ -666,15 +698,19 @@ static g3d_status hyp_add(hyp *h, int *nh, int beams, double *worst, const int32
 
 static g3d_status greedy(const g3d_blip *m, const cross_kv *x, const g3d_blip_gen *g, int32_t *seq, int *n, float *s)
 {
-    while (*n < g->max_length) {
-        G3D_TRY(next_logits(m, x, seq, *n, s));
+    self_kv cache;
+    g3d_status rc = self_make(m, g->max_length, &cache);
+    while (rc == G3D_OK && *n < g->max_length) {
+        rc = next_logits(m, x, &cache, seq, *n, s);
+        if (rc != G3D_OK) break;
         process(m, g, seq, *n, s);
         int best = 0;
         for (int v = 1; v < m->cfg.vocab; v++) best = s[v] > s[best] ? v : best;
         seq[(*n)++] = best;
         if (best == m->cfg.eos) break;
     }
-    return G3D_OK;
+    free(cache.kv);
+    return rc;
 }
 
 static g3d_status beam(const g3d_blip *m, const cross_kv *x, const g3d_blip_gen *g, int32_t *seq, int *n, float *s)
@@ -685,14 +721,16 @@ static g3d_status beam(const g3d_blip *m, const cross_kv *x, const g3d_blip_gen 
     double *all = malloc(sizeof(double) * (size_t)B * V);
     hyp *h = calloc((size_t)B + 1, sizeof *h);
     int *top = malloc(sizeof(int) * 2 * (size_t)B);
-    g3d_status rc = beams && next && bs && nbs && all && h && top ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory in BLIP");
+    self_kv *cache = calloc(2 * (size_t)B, sizeof *cache), *ncache = cache ? cache + B : NULL;
+    g3d_status rc = beams && next && bs && nbs && all && h && top && cache ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory in BLIP");
+    for (int b = 0; rc == G3D_OK && b < 2 * B; b++) rc = self_make(m, L, &cache[b]);
     for (int b = 0; rc == G3D_OK && b < B; b++) {
         memcpy(beams + (size_t)b * L, seq, sizeof(int32_t) * (size_t)cur);
         bs[b] = b ? -1e9 : 0.0; /* only the first beam is live at the start */
     }
     while (rc == G3D_OK) {
         for (int b = 0; rc == G3D_OK && b < B; b++) {
-            rc = next_logits(m, x, beams + (size_t)b * L, cur, s);
+            rc = next_logits(m, x, &cache[b], beams + (size_t)b * L, cur, s);
             log_softmax(s, V);
             process(m, g, beams + (size_t)b * L, cur, s);
             for (int v = 0; v < V; v++) all[(size_t)b * V + v] = (double)s[v] + bs[b];
@@ -717,6 +755,7 @@ static g3d_status beam(const g3d_blip *m, const cross_kv *x, const g3d_blip_gen 
             } else {
                 memcpy(next + (size_t)nb * L, beams + (size_t)b * L, sizeof(int32_t) * (size_t)cur);
                 next[(size_t)nb * L + cur] = t;
+                self_copy(&ncache[nb], &cache[b]);
                 nbs[nb++] = all[top[k]];
             }
         }
@@ -725,6 +764,9 @@ static g3d_status beam(const g3d_blip *m, const cross_kv *x, const g3d_blip_gen 
         int32_t *tmp = beams;
         beams = next;
         next = tmp;
+        self_kv *ctmp = cache;
+        cache = ncache;
+        ncache = ctmp;
         memcpy(bs, nbs, sizeof(double) * B);
         cur++;
         if (done || cur >= L) break;
@@ -738,6 +780,10 @@ static g3d_status beam(const g3d_blip *m, const cross_kv *x, const g3d_blip_gen 
         if (*n < L) seq[(*n)++] = m->cfg.eos;
     }
     for (int i = 0; h && i < nh; i++) free(h[i].ids);
+    /* cache and ncache are the two halves of one block, in either order */
+    self_kv *block = cache && ncache && ncache < cache ? ncache : cache;
+    for (int b = 0; block && b < 2 * B; b++) free(block[b].kv);
+    free(block);
     free(h);
     free(beams);
     free(next);
