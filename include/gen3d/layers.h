@@ -41,8 +41,8 @@ typedef struct g3d_layers {
     g3d_image bg_depth;   /* (h, w, 1) background depth, completed behind the foreground */
     int n_candidates, n_kept, n_foreground;
     float theta_d;
-    char *bg_prompt;      /* the prompts from params.prompts (malloc'd, or NULL): the background's */
-    char *view_prompt;    /* inpainting used bg_prompt; view_prompt is for the generated views */
+    char *bg_prompt;      /* from params.prompts (malloc'd, or NULL): the background's inpainting prompt */
+    char *view_prompt;    /* and the prompt for inpainting the generated views */
 } g3d_layers;
 void g3d_layers_free(g3d_layers *l);
 /* Deep copy into dst (overwritten, not freed first); on failure dst is left empty. */

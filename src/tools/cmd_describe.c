@@ -68,7 +68,6 @@ static int run(int argc, char **argv)
     if (!input) return g3d_cli_errorf(G3D_EXIT_USAGE, "-i IMAGE is required (see gen3d describe --help)");
     if (top < 1) return g3d_cli_errorf(G3D_EXIT_USAGE, "--top must be at least 1");
     if (beams < 1 || beams > 16) return g3d_cli_errorf(G3D_EXIT_USAGE, "--beams must be 1 to 16");
-    if (common.seed < 0) common.seed = 0; /* the colours' k-means start: fixed unless asked */
     g3d_cli_common_apply(&common);
 
     g3d_image img = {0}, mask = {0};
