@@ -233,7 +233,8 @@ static int find_token(const g3d_blip *m, const char *s)
     return -1;
 }
 
-/* Sorts idx[n] by token string (insertion into a merge sort; no global state). */
+/* Sorts idx[n] by token string: a merge sort, since qsort's comparator could not reach the strings
+ * without global state. */
 static void sort_ids(char **tok, int *idx, int *tmp, int n)
 {
     if (n < 2) return;
