@@ -6,10 +6,10 @@ T="$G3D_TEST_TMP/fixtures"
 . "$G3D_SOURCE_DIR/tests/cli_lib.sh"
 
 total=0 big=0
-for f in "$FIX"/*; do
+for f in $(find "$FIX" -type f); do
     n=$(wc -c <"$f")
     total=$((total + n))
-    [ "$n" -le 2097152 ] || { big=1; bad "${f##*/} is $n bytes (over 2 MB)"; }
+    [ "$n" -le 2097152 ] || { big=1; bad "${f#"$FIX"/} is $n bytes (over 2 MB)"; }
 done
 [ "$big" = 0 ] && ok "every fixture at most 2 MB"
 [ "$total" -le 26214400 ] && ok "all fixtures together $total bytes (at most 25 MB)" || bad "fixtures total $total bytes (over 25 MB)"

@@ -170,6 +170,14 @@ void g3d_clip_text_trace_free(g3d_clip_text_trace *tr);
 g3d_status g3d_clip_text_forward(const g3d_clip_text *m, const int32_t *ids, int n, float *out,
                                  g3d_clip_text_trace *tr);
 
+/* Width of the joint embedding (text_projection's output) when the checkpoint is a whole CLIP
+ * model (Hugging Face CLIPModel, OpenAI / OpenCLIP state dict), else 0. */
+int g3d_clip_text_embed_dim(const g3d_clip_text *m);
+/* out[embed] = the final LayerNorm's row at the end token times text_projection, as CLIP's
+ * encode_text / CLIPModel.get_text_features pool (the end token is the highest id in ids[n],
+ * as both find it). Unnormalised. G3D_ERR_MODEL without a projection. */
+g3d_status g3d_clip_text_pooled(const g3d_clip_text *m, const int32_t *ids, int n, float *out);
+
 #ifdef __cplusplus
 }
 #endif

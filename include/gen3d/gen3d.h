@@ -59,10 +59,13 @@
 #include "gen3d/membrane.h"
 #include "gen3d/regions.h"
 
+#include "gen3d/blip.h"
 #include "gen3d/ckpt.h"
+#include "gen3d/clip.h"
 #include "gen3d/depth_anything.h"
 #include "gen3d/depth_estimators.h"
 #include "gen3d/depthfit.h"
+#include "gen3d/describe.h"
 #include "gen3d/dinov2.h"
 #include "gen3d/moge.h"
 #include "gen3d/nn.h"

@@ -81,6 +81,10 @@ typedef struct g3d_generate_params {
     const char *depth_model;              /* checkpoint for the depth estimator (recognize.h) */
     const char *lama_model;               /* LaMa checkpoint for the inpainter (lama.h) */
     const char *seg_model;                /* Segment Anything checkpoint for the layers (sam.h) */
+    const g3d_prompt_provider *prompts;   /* NULL: automatic prompts (describe.h) when clip_model
+                                             or caption_model is given, else no prompts */
+    const char *clip_model;               /* CLIP model: the background prompt's scene category */
+    const char *caption_model;            /* BLIP captioner: the views' prompt */
     g3d_depth_model_params depth_model_params;
     /* ---- layers ---- */
     int layers;                       /* 1: split foreground and background (default) */

@@ -30,6 +30,7 @@ typedef struct g3d_layers_params {
     float percentile;     /* theta_d = this quantile of the valid depth (0.35) */
     float min_occluding;  /* fraction of the boundary that must occlude something (0.3) */
     int dilate;           /* grow the foreground by this many pixels before inpainting (2) */
+    const g3d_prompt_provider *prompts; /* asked once the foreground is known (NULL: no prompts) */
 } g3d_layers_params;
 /* Fills the defaults above. */
 void g3d_layers_params_default(g3d_layers_params *p);
@@ -40,6 +41,8 @@ typedef struct g3d_layers {
     g3d_image bg_depth;   /* (h, w, 1) background depth, completed behind the foreground */
     int n_candidates, n_kept, n_foreground;
     float theta_d;
+    char *bg_prompt;      /* from params.prompts (malloc'd, or NULL): the background's inpainting prompt */
+    char *view_prompt;    /* and the prompt for inpainting the generated views */
 } g3d_layers;
 void g3d_layers_free(g3d_layers *l);
 /* Deep copy into dst (overwritten, not freed first); on failure dst is left empty. */

@@ -3,9 +3,9 @@
  *
  * The world loop only sees these tables. Implementations: classical weight-free ones
  * (src/classic: inpaint_classic.h, depth_complete.h, regions.h), and neural ones (src/models:
- * g3d_inpainter_lama_create in lama.h, depth_estimators.h), chosen once per run (g3d_generate,
- * generate.h) from its parameters or passed in by the caller. Every implementation is
- * deterministic for a given seed.
+ * g3d_inpainter_lama_create in lama.h, depth_estimators.h; the prompts of describe.h), chosen
+ * once per run (g3d_generate, generate.h) from its parameters or passed in by the caller.
+ * Every implementation is deterministic for a given seed.
  *
  * LIFETIME
  *   An implementation is made by g3d_<kind>_<impl>_create(..., &table) (e.g.
@@ -75,6 +75,22 @@ typedef struct g3d_mask_provider {
 
 /* Releases the provider's context and zeroes the table. NULL or zeroed is fine. */
 void g3d_mask_provider_free(g3d_mask_provider *p);
+
+/* Writes the inpainting prompts of an image that came without text (the paper's automatic
+ * prompts: describe.h). */
+typedef struct g3d_prompt_provider {
+    const char *name;
+    void *ctx;
+    /* rgb (h, w, 3); exclude (h, w, 1): the foreground (1), left out of the background's
+     * description, or NULL. *background: the prompt for inpainting the background layer,
+     * *view: the prompt for inpainting the generated views; each malloc'd (caller frees) or
+     * NULL when the provider has none. */
+    g3d_status (*prompt)(void *ctx, const g3d_image *rgb, const g3d_image *exclude, char **background, char **view);
+    void (*free)(void *ctx); /* releases ctx; may be NULL (use g3d_prompt_provider_free) */
+} g3d_prompt_provider;
+
+/* Releases the provider's context and zeroes the table. NULL or zeroed is fine. */
+void g3d_prompt_provider_free(g3d_prompt_provider *p);
 
 #ifdef __cplusplus
 }

@@ -44,6 +44,13 @@ typedef enum g3d_resize_mode {
 /* Resizes a (sh, sw, c) interleaved buffer into (dh, dw, c) at dst (caller-allocated). */
 g3d_status g3d_resize_buffer(const float *src, int sw, int sh, int c, float *dst, int dw, int dh, g3d_resize_mode mode);
 
+/* PIL's Image.resize(BICUBIC) on 8-bit pixels, bit for bit (what torchvision's Resize does to a
+ * PIL image, hence CLIP's and BLIP's preprocessing): Keys cubic a = -0.5 widened by the
+ * shrink factor (antialiasing), coefficients in fixed point with 22 fractional bits, the
+ * horizontal pass rounded to 8 bits before the vertical one. src (sh, sw, c) interleaved,
+ * dst (dh, dw, c) caller-allocated. */
+g3d_status g3d_resize_u8_pil_bicubic(const uint8_t *src, int sw, int sh, int c, uint8_t *dst, int dw, int dh);
+
 /* Resizes src into a new image *dst of dw x dh (same channels). */
 g3d_status g3d_image_resize(const g3d_image *src, int dw, int dh, g3d_resize_mode mode, g3d_image *dst);
 

@@ -35,6 +35,7 @@ typedef struct g3d_world_params {
     g3d_cloud_render_params render;
     g3d_align_params align;
     g3d_progress progress;       /* stage "world": step per pose; stopping returns G3D_CANCELLED */
+    const char *prompt;          /* given to the inpainter for every view (NULL: none) */
 } g3d_world_params;
 /* Fills the defaults above. */
 void g3d_world_params_default(g3d_world_params *p);

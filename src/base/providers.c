@@ -22,3 +22,4 @@ static void release(void *table, size_t size, void (*free_hook)(void *), void *c
 void g3d_inpainter_free(g3d_inpainter *p) { if (p) release(p, sizeof *p, p->free, p->ctx); }
 void g3d_depth_estimator_free(g3d_depth_estimator *p) { if (p) release(p, sizeof *p, p->free, p->ctx); }
 void g3d_mask_provider_free(g3d_mask_provider *p) { if (p) release(p, sizeof *p, p->free, p->ctx); }
+void g3d_prompt_provider_free(g3d_prompt_provider *p) { if (p) release(p, sizeof *p, p->free, p->ctx); }

@@ -160,81 +160,113 @@ g3d_status g3d_image_resize(const g3d_image *src, int dw, int dh, g3d_resize_mod
     return rc;
 }
 
-/* PIL's resampling coefficients for one axis (Resample.c precompute_coeffs with the bilinear
- * filter), turned into its 22-bit fixed-point integers. */
-#define PIL_BITS 22
-static g3d_status pil_taps(int in, int out, int *ksize_out, int **bounds_out, int **kk_out)
+/* ---- PIL's 8-bit resampling (Resample.c) ----------------------------------------------- */
+#define PIL_PREC 22 /* fractional bits of PIL's fixed-point coefficients (32 - 8 - 2) */
+
+static double pil_bilinear(double x)
 {
-    double scale = (double)in / out, fscale = scale < 1.0 ? 1.0 : scale, support = fscale;
-    int ksize = (int)ceil(support) * 2 + 1;
-    int *bounds = malloc(sizeof(int) * 2 * (size_t)out), *kk = malloc(sizeof(int) * (size_t)ksize * out);
-    double *k = malloc(sizeof(double) * (size_t)ksize);
-    if (!bounds || !kk || !k) {
-        free(bounds); free(kk); free(k);
-        return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    x = fabs(x);
+    return x < 1.0 ? 1.0 - x : 0.0;
+}
+
+static double pil_bicubic(double x)
+{
+    const double a = -0.5;
+    x = fabs(x);
+    if (x < 1.0) return ((a + 2.0) * x - (a + 3.0)) * x * x + 1;
+    if (x < 2.0) return (((x - 5) * x + 8) * x - 4) * a;
+    return 0.0;
+}
+
+/* One axis's taps as PIL precomputes them (the filter widened by the shrink factor): per output
+ * coordinate the first source index, the tap count and ksize fixed-point weights. */
+static g3d_status pil_taps(int in, int out, double (*filter)(double), double filter_support, int **first, int **count,
+                           int **k, int *ksize)
+{
+    double scale = (double)in / out, fs = scale < 1.0 ? 1.0 : scale, support = filter_support * fs;
+    *ksize = (int)ceil(support) * 2 + 1;
+    *first = malloc(sizeof(int) * (size_t)out);
+    *count = malloc(sizeof(int) * (size_t)out);
+    *k = malloc(sizeof(int) * (size_t)out * *ksize);
+    double *w = malloc(sizeof(double) * (size_t)*ksize);
+    if (!*first || !*count || !*k || !w) {
+        free(*first); free(*count); free(*k); free(w);
+        *first = *count = *k = NULL;
+        return G3D_ERR(G3D_ERR_NOMEM, "resize: out of memory");
     }
     for (int o = 0; o < out; o++) {
-        double center = (o + 0.5) * scale, ww = 0.0, ss = 1.0 / fscale;
-        int xmin = (int)(center - support + 0.5), xmax = (int)(center + support + 0.5);
-        if (xmin < 0) xmin = 0;
-        if (xmax > in) xmax = in;
-        xmax -= xmin;
-        for (int x = 0; x < xmax; x++) {
-            double t = fabs((x + xmin - center + 0.5) * ss);
-            k[x] = t < 1.0 ? 1.0 - t : 0.0;
-            ww += k[x];
+        double centre = (o + 0.5) * scale, total = 0;
+        int lo = (int)(centre - support + 0.5), hi = (int)(centre + support + 0.5);
+        lo = lo < 0 ? 0 : lo;
+        hi = hi > in ? in : hi;
+        for (int x = 0; x < hi - lo; x++) total += w[x] = filter((x + lo - centre + 0.5) / fs);
+        for (int x = 0; x < *ksize; x++) {
+            double v = x < hi - lo && total != 0.0 ? w[x] / total : 0.0;
+            (*k)[(size_t)o * *ksize + x] = (int)(v < 0 ? -0.5 + v * (1 << PIL_PREC) : 0.5 + v * (1 << PIL_PREC));
         }
-        for (int x = 0; x < ksize; x++) {
-            double v = x < xmax && ww != 0.0 ? k[x] / ww : 0.0;
-            kk[(size_t)o * ksize + x] = v < 0 ? (int)(-0.5 + v * (1 << PIL_BITS)) : (int)(0.5 + v * (1 << PIL_BITS));
-        }
-        bounds[2 * o] = xmin;
-        bounds[2 * o + 1] = xmax;
+        (*first)[o] = lo;
+        (*count)[o] = hi - lo;
     }
-    free(k);
-    *ksize_out = ksize;
-    *bounds_out = bounds;
-    *kk_out = kk;
+    free(w);
     return G3D_OK;
 }
 
 static uint8_t pil_clip8(int v)
 {
-    v >>= PIL_BITS;
-    return (uint8_t)(v < 0 ? 0 : v > 255 ? 255 : v);
+    if (v >= (1 << PIL_PREC << 8)) return 255;
+    return v <= 0 ? 0 : (uint8_t)(v >> PIL_PREC);
+}
+
+/* PIL resamples the rows first (only those the column pass reads) through an 8-bit picture, and
+ * skips a pass whose size does not change. */
+static g3d_status pil_resample_u8(const uint8_t *src, int sw, int sh, int c, uint8_t *dst, int dw, int dh,
+                                  double (*filter)(double), double support)
+{
+    if (sw < 1 || sh < 1 || dw < 1 || dh < 1 || c < 1 || sw > G3D_MAX_IMAGE_SIDE || sh > G3D_MAX_IMAGE_SIDE ||
+        dw > G3D_MAX_IMAGE_SIDE || dh > G3D_MAX_IMAGE_SIDE)
+        return G3D_ERR(G3D_ERR_ARG, "resize: bad sizes %dx%d -> %dx%d", sw, sh, dw, dh);
+    int *fx = NULL, *nx = NULL, *kx = NULL, *fy = NULL, *ny = NULL, *ky = NULL, ksx = 0, ksy = 0;
+    g3d_status rc = G3D_OK;
+    if (dw != sw) rc = pil_taps(sw, dw, filter, support, &fx, &nx, &kx, &ksx);
+    if (rc == G3D_OK && dh != sh) rc = pil_taps(sh, dh, filter, support, &fy, &ny, &ky, &ksy);
+    int y0 = fy ? fy[0] : 0, y1 = fy ? fy[dh - 1] + ny[dh - 1] : sh;
+    uint8_t *mid = rc == G3D_OK ? malloc((size_t)(y1 - y0) * dw * c) : NULL;
+    if (rc == G3D_OK && !mid) rc = G3D_ERR(G3D_ERR_NOMEM, "resize: out of memory");
+    if (rc == G3D_OK) {
+        if (!fx) memcpy(mid, src + (size_t)y0 * sw * c, (size_t)(y1 - y0) * sw * c);
+        else {
+#pragma omp parallel for schedule(static)
+            for (int y = y0; y < y1; y++)
+                for (int x = 0; x < dw; x++)
+                    for (int ch = 0; ch < c; ch++) {
+                        int s = 1 << (PIL_PREC - 1);
+                        for (int t = 0; t < nx[x]; t++)
+                            s += src[((size_t)y * sw + fx[x] + t) * c + ch] * kx[(size_t)x * ksx + t];
+                        mid[((size_t)(y - y0) * dw + x) * c + ch] = pil_clip8(s);
+                    }
+        }
+        if (!fy) memcpy(dst, mid, (size_t)sh * dw * c);
+        else {
+#pragma omp parallel for schedule(static)
+            for (int y = 0; y < dh; y++)
+                for (int x = 0; x < dw * c; x++) {
+                    int s = 1 << (PIL_PREC - 1);
+                    for (int t = 0; t < ny[y]; t++) s += mid[(size_t)(fy[y] - y0 + t) * dw * c + x] * ky[(size_t)y * ksy + t];
+                    dst[(size_t)y * dw * c + x] = pil_clip8(s);
+                }
+        }
+    }
+    free(fx); free(nx); free(kx); free(fy); free(ny); free(ky);
+    free(mid);
+    return rc;
 }
 
 g3d_status g3d_resize_u8_pil_bilinear(const uint8_t *src, int sw, int sh, int c, uint8_t *dst, int dw, int dh)
 {
-    if (sw < 1 || sh < 1 || dw < 1 || dh < 1 || c < 1 || sw > G3D_MAX_IMAGE_SIDE || sh > G3D_MAX_IMAGE_SIDE ||
-        dw > G3D_MAX_IMAGE_SIDE || dh > G3D_MAX_IMAGE_SIDE)
-        return G3D_ERR(G3D_ERR_ARG, "cannot resize %dx%d to %dx%d", sw, sh, dw, dh);
-    int kx, ky, *bx = NULL, *wx = NULL, *by = NULL, *wy = NULL;
-    g3d_status rc = pil_taps(sw, dw, &kx, &bx, &wx);
-    if (rc == G3D_OK) rc = pil_taps(sh, dh, &ky, &by, &wy);
-    /* PIL resizes the rows first (only those the column pass reads), through a uint8 picture. */
-    int y0 = by ? by[0] : 0, y1 = by ? by[2 * dh - 2] + by[2 * dh - 1] : 0;
-    uint8_t *tmp = rc == G3D_OK ? malloc((size_t)dw * (y1 - y0) * c) : NULL;
-    if (rc == G3D_OK && !tmp) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
-    if (rc == G3D_OK) {
-#pragma omp parallel for schedule(static)
-        for (int y = y0; y < y1; y++)
-            for (int o = 0; o < dw; o++)
-                for (int ch = 0; ch < c; ch++) {
-                    int acc = 1 << (PIL_BITS - 1);
-                    const int *k = wx + (size_t)o * kx;
-                    for (int x = 0; x < bx[2 * o + 1]; x++) acc += src[((size_t)y * sw + bx[2 * o] + x) * c + ch] * k[x];
-                    tmp[((size_t)(y - y0) * dw + o) * c + ch] = pil_clip8(acc);
-                }
-#pragma omp parallel for schedule(static)
-        for (int o = 0; o < dh; o++)
-            for (int x = 0; x < dw * c; x++) {
-                int acc = 1 << (PIL_BITS - 1);
-                const int *k = wy + (size_t)o * ky;
-                for (int y = 0; y < by[2 * o + 1]; y++) acc += tmp[(size_t)(by[2 * o] - y0 + y) * dw * c + x] * k[y];
-                dst[(size_t)o * dw * c + x] = pil_clip8(acc);
-            }
-    }
-    free(tmp); free(bx); free(wx); free(by); free(wy);
-    return rc;
+    return pil_resample_u8(src, sw, sh, c, dst, dw, dh, pil_bilinear, 1.0);
+}
+
+g3d_status g3d_resize_u8_pil_bicubic(const uint8_t *src, int sw, int sh, int c, uint8_t *dst, int dw, int dh)
+{
+    return pil_resample_u8(src, sw, sh, c, dst, dw, dh, pil_bicubic, 2.0);
 }

@@ -3,6 +3,7 @@
  * Diffusion 1.x and 2.x publish them. Sizes come from the tensors. */
 #include "gen3d/clip_text.h"
 
+#include "clip_int.h"
 #include "gen3d/nn.h"
 
 #include <cjson/cJSON.h>
@@ -16,17 +17,13 @@
 
 #define HEAD_DIM 64   /* every published CLIP text tower: heads = width / 64 */
 
-typedef struct clip_block {
-    float *ln1w, *ln1b, *ln2w, *ln2b;
-    g3d_nn_lin qkv, out, fc1, fc2;
-} clip_block;
-
 struct g3d_clip_text {
     g3d_clip_text_config cfg;
     g3d_ckpt *own;                    /* the checkpoint when the encoder opened it */
     const g3d_tensor_info *tok;       /* token embedding [vocab, width], read row by row */
     float *pos, *lnfw, *lnfb;         /* [context, width], final LayerNorm */
-    clip_block *blocks;               /* [run_layers] */
+    g3d_clip_block *blocks;           /* [run_layers] */
+    g3d_nn_lin proj;                  /* text_projection as a Linear [embed, width]; in = 0 when absent */
 };
 
 /* <prefix> followed by the formatted name, into full[n]. */
@@ -38,7 +35,7 @@ static void vname(char *full, size_t n, const char *prefix, const char *fmt, va_
 }
 
 /* The tensor <prefix><name>, or NULL. */
-static const g3d_tensor_info *findf(const g3d_ckpt *ck, const char *prefix, const char *fmt, ...)
+const g3d_tensor_info *g3d_clip_findf(const g3d_ckpt *ck, const char *prefix, const char *fmt, ...)
 {
     char full[384];
     va_list ap;
@@ -49,7 +46,7 @@ static const g3d_tensor_info *findf(const g3d_ckpt *ck, const char *prefix, cons
 }
 
 /* Reads <prefix><name> with the given shape ([d0], or [d0, d1] when d1 > 0) as float32 (malloc'd). */
-static g3d_status readf(const g3d_ckpt *ck, const char *prefix, float **dst, int64_t d0, int64_t d1, const char *fmt, ...)
+g3d_status g3d_clip_readf(const g3d_ckpt *ck, const char *prefix, float **dst, int64_t d0, int64_t d1, const char *fmt, ...)
 {
     char full[384];
     va_list ap;
@@ -60,8 +57,7 @@ static g3d_status readf(const g3d_ckpt *ck, const char *prefix, float **dst, int
     return g3d_ckpt_read_alloc(ck, full, d1 ? 2 : 1, shape, dst);
 }
 
-/* A Linear layer [out, in] from one or (Hugging Face's q, k, v) three stacked weights. */
-static g3d_status lin(const g3d_ckpt *ck, const char *prefix, g3d_nn_lin *L, int out, int in, int parts, const char *const *w,
+g3d_status g3d_clip_lin(const g3d_ckpt *ck, const char *prefix, g3d_nn_lin *L, int out, int in, int parts, const char *const *w,
                       const char *const *b)
 {
     float *W = NULL, *B = NULL;
@@ -91,15 +87,9 @@ static g3d_status lin(const g3d_ckpt *ck, const char *prefix, g3d_nn_lin *L, int
 void g3d_clip_text_free(g3d_clip_text *m)
 {
     if (!m) return;
-    for (int i = 0; m->blocks && i < m->cfg.run_layers; i++) {
-        clip_block *b = &m->blocks[i];
-        free(b->ln1w); free(b->ln1b); free(b->ln2w); free(b->ln2b);
-        g3d_nn_lin_free(&b->qkv);
-        g3d_nn_lin_free(&b->out);
-        g3d_nn_lin_free(&b->fc1);
-        g3d_nn_lin_free(&b->fc2);
-    }
+    for (int i = 0; m->blocks && i < m->cfg.run_layers; i++) g3d_clip_block_free(&m->blocks[i]);
     free(m->blocks);
+    g3d_nn_lin_free(&m->proj);
     free(m->pos);
     free(m->lnfw);
     free(m->lnfb);
@@ -113,12 +103,12 @@ static int locate(const g3d_ckpt *ck, const char **prefix)
     static const char *const hf[] = {"cond_stage_model.transformer.", "", "text_encoder."};
     static const char *const oc[] = {"cond_stage_model.model.", ""};
     for (size_t i = 0; i < sizeof hf / sizeof hf[0]; i++)
-        if (findf(ck, hf[i], "text_model.embeddings.token_embedding.weight")) {
+        if (g3d_clip_findf(ck, hf[i], "text_model.embeddings.token_embedding.weight")) {
             *prefix = hf[i];
             return G3D_CLIP_HF;
         }
     for (size_t i = 0; i < sizeof oc / sizeof oc[0]; i++)
-        if (findf(ck, oc[i], "token_embedding.weight") && findf(ck, oc[i], "positional_embedding")) {
+        if (g3d_clip_findf(ck, oc[i], "token_embedding.weight") && g3d_clip_findf(ck, oc[i], "positional_embedding")) {
             *prefix = oc[i];
             return G3D_CLIP_OPENCLIP;
         }
@@ -133,7 +123,7 @@ g3d_status g3d_clip_text_probe(const g3d_ckpt *ck, const char *cfg_json, g3d_cli
     if (fam < 0) {
         /* say what is missing under the prefix a Stable Diffusion file would use */
         const char *want = g3d_ckpt_find(ck, "model.diffusion_model.input_blocks.0.0.weight") &&
-                                   findf(ck, "cond_stage_model.", "model.ln_final.weight") == NULL
+                                   g3d_clip_findf(ck, "cond_stage_model.", "model.ln_final.weight") == NULL
                                ? "cond_stage_model.transformer.text_model.embeddings.token_embedding.weight"
                                : "text_model.embeddings.token_embedding.weight";
         return G3D_ERR(G3D_ERR_MODEL, "%s: no CLIP text encoder (missing tensor %s, or token_embedding.weight of "
@@ -143,18 +133,18 @@ g3d_status g3d_clip_text_probe(const g3d_ckpt *ck, const char *cfg_json, g3d_cli
     c->prefix = p;
     c->eps = 1e-5f;
     int hf = fam == G3D_CLIP_HF;
-    const g3d_tensor_info *te = findf(ck, p, hf ? "text_model.embeddings.token_embedding.weight" : "token_embedding.weight");
-    const g3d_tensor_info *pe = findf(ck, p, hf ? "text_model.embeddings.position_embedding.weight" : "positional_embedding");
+    const g3d_tensor_info *te = g3d_clip_findf(ck, p, hf ? "text_model.embeddings.token_embedding.weight" : "token_embedding.weight");
+    const g3d_tensor_info *pe = g3d_clip_findf(ck, p, hf ? "text_model.embeddings.position_embedding.weight" : "positional_embedding");
     if (!te || te->ndim != 2 || !pe || pe->ndim != 2 || pe->shape[1] != te->shape[1])
         return G3D_ERR(G3D_ERR_MODEL, "%s: %sposition embedding missing or not [context, %lld]", g3d_ckpt_path(ck), p,
                        te && te->ndim == 2 ? (long long)te->shape[1] : 0LL);
     c->vocab = (int)te->shape[0];
     c->width = (int)te->shape[1];
     c->context = (int)pe->shape[0];
-    while (findf(ck, p, hf ? "text_model.encoder.layers.%d.self_attn.q_proj.weight" : "transformer.resblocks.%d.attn.in_proj_weight",
+    while (g3d_clip_findf(ck, p, hf ? "text_model.encoder.layers.%d.self_attn.q_proj.weight" : "transformer.resblocks.%d.attn.in_proj_weight",
                  c->layers))
         c->layers++;
-    const g3d_tensor_info *fc = findf(ck, p, hf ? "text_model.encoder.layers.0.mlp.fc1.weight" : "transformer.resblocks.0.mlp.c_fc.weight");
+    const g3d_tensor_info *fc = g3d_clip_findf(ck, p, hf ? "text_model.encoder.layers.0.mlp.fc1.weight" : "transformer.resblocks.0.mlp.c_fc.weight");
     if (!c->layers || !fc || fc->ndim != 2)
         return G3D_ERR(G3D_ERR_MODEL, "%s: missing tensor %s%s", g3d_ckpt_path(ck), p,
                        !c->layers ? (hf ? "text_model.encoder.layers.0.self_attn.q_proj.weight" : "transformer.resblocks.0.attn.in_proj_weight")
@@ -175,7 +165,8 @@ g3d_status g3d_clip_text_probe(const g3d_ckpt *ck, const char *cfg_json, g3d_cli
         const cJSON *nh = cJSON_GetObjectItemCaseSensitive(j, "num_attention_heads");
         const cJSON *eps = cJSON_GetObjectItemCaseSensitive(j, "layer_norm_eps");
         if (act && !strcmp(act, "gelu")) c->act = G3D_ACT_GELU;
-        else if (act && strcmp(act, "quick_gelu")) {
+        else if (act && !strcmp(act, "quick_gelu")) c->act = G3D_ACT_QUICK_GELU;
+        else if (act) {
             g3d_status rc = G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: hidden_act \"%s\" (quick_gelu or gelu expected)", g3d_ckpt_path(ck), act);
             cJSON_Delete(j);
             return rc;
@@ -190,47 +181,110 @@ g3d_status g3d_clip_text_probe(const g3d_ckpt *ck, const char *cfg_json, g3d_cli
     return G3D_OK;
 }
 
-static g3d_status load_block(const g3d_ckpt *ck, const g3d_clip_text_config *c, int i, clip_block *b)
+g3d_status g3d_clip_block_load(const g3d_ckpt *ck, int hf, const char *base, int D, int M, g3d_clip_block *b)
 {
-    const char *p = c->prefix;
-    int D = c->width, M = c->mlp;
-    char w[3][128], bs[3][128], ln[2][128];
+    char w[3][384], bs[3][384], ln[2][384];
     const char *wp[3] = {w[0], w[1], w[2]}, *bp[3] = {bs[0], bs[1], bs[2]};
-    if (c->family == G3D_CLIP_HF) {
+    if (hf) {
         static const char *const qkv[] = {"q", "k", "v"};
         for (int k = 0; k < 3; k++) {
-            snprintf(w[k], sizeof w[k], "text_model.encoder.layers.%d.self_attn.%s_proj.weight", i, qkv[k]);
-            snprintf(bs[k], sizeof bs[k], "text_model.encoder.layers.%d.self_attn.%s_proj.bias", i, qkv[k]);
+            snprintf(w[k], sizeof w[k], "%sself_attn.%s_proj.weight", base, qkv[k]);
+            snprintf(bs[k], sizeof bs[k], "%sself_attn.%s_proj.bias", base, qkv[k]);
         }
-        snprintf(ln[0], sizeof ln[0], "text_model.encoder.layers.%d.layer_norm1.", i);
-        snprintf(ln[1], sizeof ln[1], "text_model.encoder.layers.%d.layer_norm2.", i);
+        snprintf(ln[0], sizeof ln[0], "%slayer_norm1.", base);
+        snprintf(ln[1], sizeof ln[1], "%slayer_norm2.", base);
     } else {
-        snprintf(w[0], sizeof w[0], "transformer.resblocks.%d.attn.in_proj_weight", i);
-        snprintf(bs[0], sizeof bs[0], "transformer.resblocks.%d.attn.in_proj_bias", i);
-        snprintf(ln[0], sizeof ln[0], "transformer.resblocks.%d.ln_1.", i);
-        snprintf(ln[1], sizeof ln[1], "transformer.resblocks.%d.ln_2.", i);
+        snprintf(w[0], sizeof w[0], "%sattn.in_proj_weight", base);
+        snprintf(bs[0], sizeof bs[0], "%sattn.in_proj_bias", base);
+        snprintf(ln[0], sizeof ln[0], "%sln_1.", base);
+        snprintf(ln[1], sizeof ln[1], "%sln_2.", base);
     }
-    int hf = c->family == G3D_CLIP_HF;
-    G3D_TRY(lin(ck, p, &b->qkv, 3 * D, D, hf ? 3 : 1, wp, bp));
-    G3D_TRY(readf(ck, p, &b->ln1w, D, 0, "%sweight", ln[0]));
-    G3D_TRY(readf(ck, p, &b->ln1b, D, 0, "%sbias", ln[0]));
-    G3D_TRY(readf(ck, p, &b->ln2w, D, 0, "%sweight", ln[1]));
-    G3D_TRY(readf(ck, p, &b->ln2b, D, 0, "%sbias", ln[1]));
+    G3D_TRY(g3d_clip_lin(ck, "", &b->qkv, 3 * D, D, hf ? 3 : 1, wp, bp));
+    G3D_TRY(g3d_clip_readf(ck, "", &b->ln1w, D, 0, "%sweight", ln[0]));
+    G3D_TRY(g3d_clip_readf(ck, "", &b->ln1b, D, 0, "%sbias", ln[0]));
+    G3D_TRY(g3d_clip_readf(ck, "", &b->ln2w, D, 0, "%sweight", ln[1]));
+    G3D_TRY(g3d_clip_readf(ck, "", &b->ln2b, D, 0, "%sbias", ln[1]));
     static const char *const hfn[3] = {"self_attn.out_proj", "mlp.fc1", "mlp.fc2"};
     static const char *const ocn[3] = {"attn.out_proj", "mlp.c_fc", "mlp.c_proj"};
     g3d_nn_lin *L[3] = {&b->out, &b->fc1, &b->fc2};
     int dims[3][2] = {{D, D}, {M, D}, {D, M}};
     for (int k = 0; k < 3; k++) {
-        if (hf) {
-            snprintf(w[0], sizeof w[0], "text_model.encoder.layers.%d.%s.weight", i, hfn[k]);
-            snprintf(bs[0], sizeof bs[0], "text_model.encoder.layers.%d.%s.bias", i, hfn[k]);
-        } else {
-            snprintf(w[0], sizeof w[0], "transformer.resblocks.%d.%s.weight", i, ocn[k]);
-            snprintf(bs[0], sizeof bs[0], "transformer.resblocks.%d.%s.bias", i, ocn[k]);
-        }
-        G3D_TRY(lin(ck, p, L[k], dims[k][0], dims[k][1], 1, wp, bp));
+        snprintf(w[0], sizeof w[0], "%s%s.weight", base, hf ? hfn[k] : ocn[k]);
+        snprintf(bs[0], sizeof bs[0], "%s%s.bias", base, hf ? hfn[k] : ocn[k]);
+        G3D_TRY(g3d_clip_lin(ck, "", L[k], dims[k][0], dims[k][1], 1, wp, bp));
     }
     return G3D_OK;
+}
+
+void g3d_clip_block_free(g3d_clip_block *b)
+{
+    free(b->ln1w); free(b->ln1b); free(b->ln2w); free(b->ln2b);
+    g3d_nn_lin_free(&b->qkv);
+    g3d_nn_lin_free(&b->out);
+    g3d_nn_lin_free(&b->fc1);
+    g3d_nn_lin_free(&b->fc2);
+}
+
+g3d_status g3d_clip_block_forward(const g3d_clip_block *b, const g3d_clip_block_shape *s, float *X, int n,
+                                  g3d_clip_scratch *w)
+{
+    int D = s->width, hd = D / s->heads;
+    g3d_nn_layernorm(X, n, D, b->ln1w, b->ln1b, s->eps, w->T);
+    g3d_status rc = g3d_nn_lin_forward(&b->qkv, w->T, n, 0, w->QKV, 0, NULL);
+    g3d_nn_attn a = {.nq = n, .nk = n, .heads = s->heads, .hd = hd, .q = w->QKV, .k = w->QKV + D, .v = w->QKV + 2 * D,
+                     .ldq = 3 * D, .ldk = 3 * D, .ldv = 3 * D, .out = w->A, .scale = 1.0f / sqrtf((float)hd),
+                     .causal = s->causal};
+    if (rc == G3D_OK) rc = g3d_nn_attend(&a);
+    g3d_nn_epi res = {.res = X};
+    if (rc == G3D_OK) rc = g3d_nn_lin_forward(&b->out, w->A, n, 0, X, 0, &res);
+    g3d_nn_layernorm(X, n, D, b->ln2w, b->ln2b, s->eps, w->T);
+    g3d_nn_epi act = {.act = s->act};
+    if (rc == G3D_OK) rc = g3d_nn_lin_forward(&b->fc1, w->T, n, 0, w->H, 0, &act);
+    if (rc == G3D_OK) rc = g3d_nn_lin_forward(&b->fc2, w->H, n, 0, X, 0, &res);
+    return rc;
+}
+
+g3d_status g3d_clip_scratch_alloc(g3d_clip_scratch *w, int n, int D, int M)
+{
+    size_t nd = (size_t)n * D;
+    w->T = malloc(sizeof(float) * nd);
+    w->A = malloc(sizeof(float) * nd);
+    w->QKV = malloc(sizeof(float) * 3 * nd);
+    w->H = malloc(sizeof(float) * (size_t)n * M);
+    if (w->T && w->A && w->QKV && w->H) return G3D_OK;
+    g3d_clip_scratch_free(w);
+    return G3D_ERR(G3D_ERR_NOMEM, "out of memory in a CLIP transformer");
+}
+
+void g3d_clip_scratch_free(g3d_clip_scratch *w)
+{
+    free(w->T);
+    free(w->A);
+    free(w->QKV);
+    free(w->H);
+    memset(w, 0, sizeof *w);
+}
+
+/* CLIPModel's text_projection: Hugging Face's Linear weight [embed, width] or OpenAI's matrix
+ * [width, embed] (x @ P), beside the tower; absent in Stable Diffusion's text encoders. */
+static g3d_status load_projection(const g3d_ckpt *ck, const g3d_clip_text_config *c, g3d_nn_lin *L)
+{
+    int hf = c->family == G3D_CLIP_HF;
+    const g3d_tensor_info *t = g3d_clip_findf(ck, c->prefix, hf ? "text_projection.weight" : "text_projection");
+    if (!t) return G3D_OK;
+    if (t->ndim != 2 || t->shape[hf ? 1 : 0] != c->width)
+        return G3D_ERR(G3D_ERR_MODEL, "%s: %stext_projection is not a [%d, embed] matrix", g3d_ckpt_path(ck), c->prefix, c->width);
+    int E = (int)t->shape[hf ? 0 : 1], W = c->width;
+    float *P = NULL, *Q = malloc(sizeof(float) * (size_t)E * W);
+    int64_t shape[2] = {t->shape[0], t->shape[1]};
+    g3d_status rc = Q ? g3d_clip_readf(ck, c->prefix, &P, shape[0], shape[1], hf ? "text_projection.weight" : "text_projection")
+                      : G3D_ERR(G3D_ERR_NOMEM, "out of memory loading the text encoder");
+    for (int e = 0; rc == G3D_OK && e < E; e++)
+        for (int k = 0; k < W; k++) Q[(size_t)e * W + k] = hf ? P[(size_t)e * W + k] : P[(size_t)k * E + e];
+    if (rc == G3D_OK) rc = g3d_nn_lin_init(L, Q, G3D_DT_F32, NULL, E, W, G3D_DT_F32);
+    free(P);
+    free(Q);
+    return rc;
 }
 
 g3d_status g3d_clip_text_load_ckpt(const g3d_ckpt *ck, const char *cfg_json, g3d_clip_text **out)
@@ -243,14 +297,19 @@ g3d_status g3d_clip_text_load_ckpt(const g3d_ckpt *ck, const char *cfg_json, g3d
     const char *p = c->prefix;
     int hf = c->family == G3D_CLIP_HF, D = c->width;
     if (rc == G3D_OK) {
-        m->tok = findf(ck, p, hf ? "text_model.embeddings.token_embedding.weight" : "token_embedding.weight");
-        rc = readf(ck, p, &m->pos, c->context, D, hf ? "text_model.embeddings.position_embedding.weight" : "positional_embedding");
+        m->tok = g3d_clip_findf(ck, p, hf ? "text_model.embeddings.token_embedding.weight" : "token_embedding.weight");
+        rc = g3d_clip_readf(ck, p, &m->pos, c->context, D, hf ? "text_model.embeddings.position_embedding.weight" : "positional_embedding");
     }
-    if (rc == G3D_OK) rc = readf(ck, p, &m->lnfw, D, 0, hf ? "text_model.final_layer_norm.weight" : "ln_final.weight");
-    if (rc == G3D_OK) rc = readf(ck, p, &m->lnfb, D, 0, hf ? "text_model.final_layer_norm.bias" : "ln_final.bias");
+    if (rc == G3D_OK) rc = g3d_clip_readf(ck, p, &m->lnfw, D, 0, hf ? "text_model.final_layer_norm.weight" : "ln_final.weight");
+    if (rc == G3D_OK) rc = g3d_clip_readf(ck, p, &m->lnfb, D, 0, hf ? "text_model.final_layer_norm.bias" : "ln_final.bias");
     if (rc == G3D_OK && !(m->blocks = calloc((size_t)c->run_layers, sizeof *m->blocks)))
         rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory loading the text encoder");
-    for (int i = 0; rc == G3D_OK && i < c->run_layers; i++) rc = load_block(ck, c, i, &m->blocks[i]);
+    for (int i = 0; rc == G3D_OK && i < c->run_layers; i++) {
+        char base[256];
+        snprintf(base, sizeof base, hf ? "%stext_model.encoder.layers.%d." : "%stransformer.resblocks.%d.", p, i);
+        rc = g3d_clip_block_load(ck, hf, base, D, c->mlp, &m->blocks[i]);
+    }
+    if (rc == G3D_OK) rc = load_projection(ck, c, &m->proj);
     if (rc != G3D_OK) {
         if (!m->blocks) m->cfg.run_layers = 0;
         g3d_clip_text_free(m);
@@ -347,15 +406,15 @@ static float *dup_rows(const float *x, size_t n)
 g3d_status g3d_clip_text_forward(const g3d_clip_text *m, const int32_t *ids, int n, float *out, g3d_clip_text_trace *tr)
 {
     const g3d_clip_text_config *c = &m->cfg;
-    int D = c->width, M = c->mlp, hd = D / c->heads;
+    int D = c->width;
     if (n < 1 || n > c->context) return G3D_ERR(G3D_ERR_ARG, "%d tokens: 1 to %d expected", n, c->context);
     for (int i = 0; i < n; i++)
         if (ids[i] < 0 || ids[i] >= c->vocab)
             return G3D_ERR(G3D_ERR_ARG, "token id %d at %d outside the vocabulary (%d)", ids[i], i, c->vocab);
     size_t nd = (size_t)n * D;
-    float *X = malloc(sizeof(float) * nd), *T = malloc(sizeof(float) * nd), *A = malloc(sizeof(float) * nd);
-    float *QKV = malloc(sizeof(float) * 3 * nd), *H = malloc(sizeof(float) * (size_t)n * M);
-    g3d_status rc = X && T && A && QKV && H ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory in the text encoder");
+    g3d_clip_scratch w = {0};
+    float *X = malloc(sizeof(float) * nd);
+    g3d_status rc = X ? g3d_clip_scratch_alloc(&w, n, D, c->mlp) : G3D_ERR(G3D_ERR_NOMEM, "out of memory in the text encoder");
     if (tr && tr->want && rc == G3D_OK) {
         g3d_clip_text_trace_free(tr);
         tr->hidden = calloc((size_t)c->run_layers, sizeof *tr->hidden);
@@ -370,26 +429,29 @@ g3d_status g3d_clip_text_forward(const g3d_clip_text *m, const int32_t *ids, int
         }
         if (tr && tr->want) tr->embed = dup_rows(X, nd);
     }
+    g3d_clip_block_shape sh = {.width = D, .heads = c->heads, .act = c->act, .eps = c->eps, .causal = 1};
     for (int l = 0; rc == G3D_OK && l < c->run_layers; l++) {
-        const clip_block *b = &m->blocks[l];
-        g3d_nn_layernorm(X, n, D, b->ln1w, b->ln1b, c->eps, T);
-        rc = g3d_nn_lin_forward(&b->qkv, T, n, 0, QKV, 0, NULL);
-        g3d_nn_attn a = {.nq = n, .nk = n, .heads = c->heads, .hd = hd, .q = QKV, .k = QKV + D, .v = QKV + 2 * D,
-                         .ldq = 3 * D, .ldk = 3 * D, .ldv = 3 * D, .out = A, .scale = 1.0f / sqrtf((float)hd), .causal = 1};
-        if (rc == G3D_OK) rc = g3d_nn_attend(&a);
-        g3d_nn_epi res = {.res = X};
-        if (rc == G3D_OK) rc = g3d_nn_lin_forward(&b->out, A, n, 0, X, 0, &res);
-        g3d_nn_layernorm(X, n, D, b->ln2w, b->ln2b, c->eps, T);
-        g3d_nn_epi act = {.act = c->act};
-        if (rc == G3D_OK) rc = g3d_nn_lin_forward(&b->fc1, T, n, 0, H, 0, &act);
-        if (rc == G3D_OK) rc = g3d_nn_lin_forward(&b->fc2, H, n, 0, X, 0, &res);
+        rc = g3d_clip_block_forward(&m->blocks[l], &sh, X, n, &w);
         if (rc == G3D_OK && tr && tr->want) tr->hidden[l] = dup_rows(X, nd);
     }
     if (rc == G3D_OK) g3d_nn_layernorm(X, n, D, m->lnfw, m->lnfb, c->eps, out);
     free(X);
-    free(T);
-    free(A);
-    free(QKV);
-    free(H);
+    g3d_clip_scratch_free(&w);
+    return rc;
+}
+
+int g3d_clip_text_embed_dim(const g3d_clip_text *m) { return m->proj.in ? m->proj.out : 0; }
+
+g3d_status g3d_clip_text_pooled(const g3d_clip_text *m, const int32_t *ids, int n, float *out)
+{
+    if (!m->proj.in) return G3D_ERR(G3D_ERR_MODEL, "the text encoder has no text_projection (not a CLIPModel checkpoint)");
+    int eot = 0;
+    for (int i = 1; i < n; i++)
+        if (ids[i] > ids[eot]) eot = i;
+    /* the mask is causal: the rows after the end token change nothing before it */
+    float *h = malloc(sizeof(float) * (size_t)(eot + 1) * m->cfg.width);
+    g3d_status rc = h ? g3d_clip_text_forward(m, ids, eot + 1, h, NULL) : G3D_ERR(G3D_ERR_NOMEM, "out of memory in the text encoder");
+    if (rc == G3D_OK) rc = g3d_nn_lin_forward(&m->proj, h + (size_t)eot * m->cfg.width, 1, 0, out, 0, NULL);
+    free(h);
     return rc;
 }

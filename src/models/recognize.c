@@ -1,6 +1,8 @@
 /* Model recognition: one table of signatures, from checkpoint content only. */
 #include "gen3d/recognize.h"
 
+#include "gen3d/blip.h"
+#include "gen3d/clip.h"
 #include "gen3d/clip_text.h"
 
 #include <cjson/cJSON.h>
@@ -100,6 +102,21 @@ const char *g3d_model_describe(const g3d_ckpt *ck, char *buf, size_t n)
                  g3d_ckpt_find(ck, "scale_head.0.weight") ? ", metric scale" : "");
         return buf;
     }
+    /* a whole CLIP model, a BLIP captioner */
+    g3d_clip_config vc;
+    g3d_blip_config bc;
+    if (g3d_clip_probe(ck, &vc) == G3D_OK) {
+        snprintf(buf, n, "CLIP model (image tower: %d px, patch %d, width %d, %d layers; embedding %d; gen3d describe --clip)",
+                 vc.image_size, vc.patch, vc.width, vc.layers, vc.embed);
+        return buf;
+    }
+    if (g3d_blip_probe(ck, &bc) == G3D_OK) {
+        snprintf(buf, n, "BLIP captioner (%s layout: ViT %d px, patch %d, width %d, %d blocks; BERT decoder width %d, %d layers; "
+                 "gen3d describe --caption-model)", bc.hf ? "Hugging Face" : "Salesforce", bc.image_size, bc.patch, bc.vis_width,
+                 bc.vis_layers, bc.width, bc.layers);
+        return buf;
+    }
+    g3d_error_clear();
     /* a CLIP text tower, alone or inside a Stable Diffusion checkpoint */
     g3d_clip_text_config clip;
     if (g3d_clip_text_probe(ck, NULL, &clip) == G3D_OK) return g3d_clip_text_describe(&clip, buf, n);

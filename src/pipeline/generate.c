@@ -2,6 +2,7 @@
  * struct in memory; the files are written once, at the end. */
 #include "gen3d/generate.h"
 #include "gen3d/depth_complete.h"
+#include "gen3d/describe.h"
 #include "gen3d/imageio.h"
 #include "gen3d/init.h"
 #include "gen3d/inpaint_classic.h"
@@ -63,6 +64,9 @@ typedef struct run {
     g3d_inpainter own_inpainter;
     g3d_depth_estimator own_depth;
     g3d_mask_provider own_masks;
+    g3d_prompt_provider own_prompts;
+    const g3d_prompt_provider *prompts;  /* NULL: none */
+    char *bg_prompt, *view_prompt;     /* the prompts of a run without layers */
     const g3d_inpainter *inpainter;
     const g3d_depth_estimator *depth;
     const g3d_mask_provider *masks;
@@ -171,10 +175,22 @@ static g3d_status make_inpainter(run *r)
     return G3D_OK;
 }
 
+/* The prompt provider: the caller's, or the automatic prompts from the CLIP and BLIP models. */
+static g3d_status make_prompts(run *r)
+{
+    const g3d_generate_params *p = r->p;
+    r->prompts = p->prompts;
+    if (p->prompts || (!p->clip_model && !p->caption_model)) return G3D_OK;
+    G3D_TRY(g3d_prompt_provider_describe_create(p->clip_model, NULL, p->caption_model, p->seed, &r->own_prompts));
+    r->prompts = &r->own_prompts;
+    return G3D_OK;
+}
+
 static g3d_status stage_input(run *r)
 {
     const g3d_generate_params *p = r->p;
     G3D_TRY(make_inpainter(r));
+    G3D_TRY(make_prompts(r));
     G3D_TRY(make_depth(r));
     if (p->frame) {
         G3D_TRY(g3d_frame_validate(p->frame, p->frame->name[0] ? p->frame->name : "input frame"));
@@ -206,8 +222,11 @@ static g3d_status stage_layers(run *r)
         r->masks = &r->own_masks;
     }
     const g3d_frame *f = r->input;
-    return g3d_layers_compute(&f->rgb, &f->depth, r->masks, r->inpainter, r->depth, &p->layers_params, p->seed,
-                              &r->layers);
+    g3d_layers_params lp = p->layers_params;
+    if (r->prompts) lp.prompts = r->prompts;
+    G3D_TRY(g3d_layers_compute(&f->rgb, &f->depth, r->masks, r->inpainter, r->depth, &lp, p->seed, &r->layers));
+    if (r->layers.bg_prompt) g3d_log(G3D_LOG_INFO, "background prompt: %s", r->layers.bg_prompt);
+    return G3D_OK;
 }
 
 /* ---- world ----------------------------------------------------------------------------------- */
@@ -262,6 +281,10 @@ static g3d_status stage_world(run *r)
     G3D_TRY(make_poses(p, f, &poses, &n));
     g3d_world_params wp = p->world;
     wp.progress = r->progress;
+    if (r->prompts && !p->layers)
+        G3D_TRY(r->prompts->prompt(r->prompts->ctx, &f->rgb, NULL, &r->bg_prompt, &r->view_prompt));
+    if (r->prompts) wp.prompt = p->layers ? r->layers.view_prompt : r->view_prompt;
+    if (wp.prompt) g3d_log(G3D_LOG_INFO, "views' prompt: %s", wp.prompt);
     g3d_log(G3D_LOG_INFO, "world: %s, %dx%d, %d poses (%s), %d extra views", f->name, f->rgb.w, f->rgb.h, n, p->trajectory,
             wp.extra_views);
     double t0 = g3d_time_now();
@@ -424,6 +447,14 @@ static cJSON *config_json(const run *r)
         if (p->depth_model && !p->depth) cJSON_AddStringToObject(c, "depth_model", p->depth_model);
         if (p->lama_model && !p->inpainter) cJSON_AddStringToObject(c, "lama_model", p->lama_model);
         if (p->seg_model && !p->masks) cJSON_AddStringToObject(c, "seg_model", p->seg_model);
+        if (r->prompts) {
+            const char *bg = p->layers ? r->layers.bg_prompt : r->bg_prompt, *view = p->layers ? r->layers.view_prompt : r->view_prompt;
+            cJSON_AddStringToObject(c, "prompt_provider", r->prompts->name);
+            if (p->clip_model && !p->prompts) cJSON_AddStringToObject(c, "clip_model", p->clip_model);
+            if (p->caption_model && !p->prompts) cJSON_AddStringToObject(c, "caption_model", p->caption_model);
+            if (bg) cJSON_AddStringToObject(c, "background_prompt", bg);
+            if (view) cJSON_AddStringToObject(c, "view_prompt", view);
+        }
     }
     cJSON_AddNumberToObject(c, "iterations", (double)p->train.iterations);
     cJSON_AddNumberToObject(c, "sh_degree", p->sh_degree);
@@ -519,6 +550,9 @@ static void run_free(run *r)
     g3d_inpainter_free(&r->own_inpainter);
     g3d_depth_estimator_free(&r->own_depth);
     g3d_mask_provider_free(&r->own_masks);
+    g3d_prompt_provider_free(&r->own_prompts);
+    free(r->bg_prompt);
+    free(r->view_prompt);
     if (r->tmp) g3d_atomic_dir_abort(r->tmp);
     free(r->tmp);
 }

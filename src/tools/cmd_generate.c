@@ -25,7 +25,11 @@ static const char *description(void)
                      "  dataset/         the world-generation folder (views, depth, masks, points.ply, log)\n"
                      "A summary (timings per stage, Gaussian count, training PSNR) goes to stdout.\n"
                      "--world DIR trains on a world folder written earlier (by `gen3d world`, or a dataset/)\n"
-                     "instead of generating one.\n\n");
+                     "instead of generating one.\n"
+                     "--clip and --caption-model write the inpainting prompts automatically (as `gen3d\n"
+                     "describe`): the background template with CLIP's scene category and the background's\n"
+                     "colours, and BLIP's caption for the views; config.json records them. The inpainters built\n"
+                     "in so far (PatchMatch, LaMa) take no text.\n\n");
     g3d_cli_world_help(g_description, k, (int)sizeof g_description);
     return g_description;
 }

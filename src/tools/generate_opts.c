@@ -22,6 +22,8 @@ int g3d_cli_generate_opts(g3d_cli_generate *g, g3d_opt *out)
     const g3d_opt opts[] = {
         G3D_INPUT_OPTS(&g->in),
         G3D_WORLD_OPTS(&g->wo),
+        {0, "clip", G3D_OPT_PATH, &p->clip_model, "MODEL", "CLIP model: scene category in the background prompt (docs/describe.md)"},
+        {0, "caption-model", G3D_OPT_PATH, &p->caption_model, "MODEL", "BLIP captioner: the views' inpainting prompt"},
         {0, "world", G3D_OPT_PATH, &p->world_dir, "DIR", "train on this world folder instead of generating one"},
         {0, "iters", G3D_OPT_INT, &g->iters, "N", "training iterations"},
         {0, "sh-degree", G3D_OPT_INT, &p->sh_degree, "D", "spherical-harmonics degree of the Gaussians (0..3)"},
@@ -46,6 +48,8 @@ int g3d_cli_generate_check(const g3d_cli_generate *g)
     if (p->sh_degree < 0 || p->sh_degree > 3) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sh-degree must be in 0..3");
     if (p->video_frames < 2 || p->video_frames > 100000) return g3d_cli_errorf(G3D_EXIT_USAGE, "--frames must be in 2..100000");
     if (p->video_params.fps < 1 || p->video_params.fps > 240) return g3d_cli_errorf(G3D_EXIT_USAGE, "--fps must be in 1..240");
+    if (p->world_dir && (p->clip_model || p->caption_model))
+        return g3d_cli_errorf(G3D_EXIT_USAGE, "--world skips inpainting: no --clip or --caption-model");
     if (p->world_dir && (g->in.rgb || g->in.depth_model))
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--world trains on a generated world: no -i or --depth-model");
     return 0;

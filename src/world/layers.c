@@ -7,7 +7,7 @@
 
 void g3d_layers_params_default(g3d_layers_params *p)
 {
-    *p = (g3d_layers_params){0.85f, 0.005f, 0.60f, 0.35f, 0.3f, 2};
+    *p = (g3d_layers_params){0.85f, 0.005f, 0.60f, 0.35f, 0.3f, 2, NULL};
 }
 
 void g3d_layers_free(g3d_layers *l)
@@ -16,6 +16,8 @@ void g3d_layers_free(g3d_layers *l)
     g3d_image_free(&l->fg_mask);
     g3d_image_free(&l->bg_rgb);
     g3d_image_free(&l->bg_depth);
+    free(l->bg_prompt);
+    free(l->view_prompt);
     memset(l, 0, sizeof *l);
 }
 
@@ -23,7 +25,11 @@ g3d_status g3d_layers_clone(g3d_layers *dst, const g3d_layers *src)
 {
     *dst = *src;
     dst->fg_mask = dst->bg_rgb = dst->bg_depth = (g3d_image){0};
-    g3d_status rc = G3D_OK;
+    dst->bg_prompt = src->bg_prompt ? strdup(src->bg_prompt) : NULL;
+    dst->view_prompt = src->view_prompt ? strdup(src->view_prompt) : NULL;
+    g3d_status rc = (src->bg_prompt && !dst->bg_prompt) || (src->view_prompt && !dst->view_prompt)
+                        ? G3D_ERR(G3D_ERR_NOMEM, "layers: out of memory")
+                        : G3D_OK;
     if (src->fg_mask.data) rc = g3d_image_clone(&dst->fg_mask, &src->fg_mask);
     if (rc == G3D_OK && src->bg_rgb.data) rc = g3d_image_clone(&dst->bg_rgb, &src->bg_rgb);
     if (rc == G3D_OK && src->bg_depth.data) rc = g3d_image_clone(&dst->bg_depth, &src->bg_depth);
@@ -116,7 +122,8 @@ g3d_status g3d_layers_compute(const g3d_image *rgb, const g3d_image *depth, cons
         g3d_image_free(&prev);
     }
     if (rc == G3D_OK) rc = g3d_image_clone(&out->bg_rgb, rgb);
-    if (rc == G3D_OK && out->n_foreground) rc = inpaint->inpaint(inpaint->ctx, &out->bg_rgb, &grown, NULL, seed);
+    if (rc == G3D_OK && p->prompts) rc = p->prompts->prompt(p->prompts->ctx, rgb, &out->fg_mask, &out->bg_prompt, &out->view_prompt);
+    if (rc == G3D_OK && out->n_foreground) rc = inpaint->inpaint(inpaint->ctx, &out->bg_rgb, &grown, out->bg_prompt, seed);
     if (rc == G3D_OK) rc = g3d_image_clone(&known, depth);
     if (rc == G3D_OK) {
         for (size_t i = 0; i < n; i++) if (grown.data[i] > 0.5f) known.data[i] = 0;

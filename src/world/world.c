@@ -88,7 +88,7 @@ static g3d_status world_step(g3d_world *w, int i, const g3d_inpainter *inpaint, 
         goto done;
     }
     t = g3d_time_now();
-    if (nh) rc = inpaint->inpaint(inpaint->ctx, &rgb, &holes, NULL, seed + (uint64_t)i * 7919u);
+    if (nh) rc = inpaint->inpaint(inpaint->ctx, &rgb, &holes, p->prompt, seed + (uint64_t)i * 7919u);
     st->seconds_inpaint = g3d_time_now() - t;
     if (rc != G3D_OK) goto done;
     t = g3d_time_now();
