@@ -1,0 +1,117 @@
+/* gen3d/sd.h - Stable Diffusion's latent-diffusion UNet and its VAE (AutoencoderKL), loaded from
+ * the published single-file checkpoints (model.diffusion_model.*, first_stage_model.*; .ckpt or
+ * .safetensors) with no conversion.
+ *
+ *   g3d_ckpt *ck;  g3d_sd_unet *unet;  g3d_sd_vae *vae;
+ *   g3d_ckpt_open("v1-5-pruned-emaonly.safetensors", &ck);
+ *   g3d_sd_unet_load(ck, NULL, &unet);                  // SD 1.x defaults, or a yaml's fields
+ *   g3d_sd_vae_load(ck, &vae);
+ *   g3d_sd_unet_forward(unet, x, 64, 64, 981, ctx, 77, eps, NULL);   // x [in_ch, 64, 64]
+ *   g3d_sd_vae_decode(vae, z, 64, 64, rgb);            // z = latent / G3D_SD_VAE_SCALE
+ *
+ * Layouts are channels first, batch 1: a latent is [4, h, w], a picture [3, 8h, 8w] in [-1, 1]
+ * (for the published 4-level VAE), the text context [n, context_dim] row-major.
+ *
+ * ARCHITECTURE. Sizes come from the tensors: in-channels (4 text-to-image, 9 inpainting), model
+ * channels, the channel multipliers and res blocks per level, which levels have attention, the
+ * transformer depth, the context width, Linear or 1x1-conv projections. What the tensors cannot
+ * say, the head split, follows the family's published configuration (SD 1.x: 8 heads; SD 2.x,
+ * the Linear-projection UNets: heads of 64 channels) unless the original yaml configuration
+ * (num_heads / num_head_channels / parameterization) is given. Weights stay in the file's type
+ * (fp16, bf16 or fp32) and, for safetensors and PyTorch zips, in the memory mapping.
+ *
+ * A model is immutable after loading; several threads may run it at once.
+ */
+#ifndef G3D_SD_H
+#define G3D_SD_H
+
+#include "gen3d/base.h"
+#include "gen3d/ckpt.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define G3D_SD_MAX_LEVELS 8
+/* The latent scale of SD 1.x and 2.x (latent = scale * the VAE's mean). */
+#define G3D_SD_VAE_SCALE 0.18215f
+
+typedef enum g3d_sd_pred {
+    G3D_SD_PRED_EPS, /* the UNet predicts the noise (SD 1.x, SD 2.x base 512) */
+    G3D_SD_PRED_V    /* v-prediction (SD 2.x 768-v): from the yaml's parameterization: "v" */
+} g3d_sd_pred;
+
+typedef struct g3d_sd_unet_config {
+    const char *prefix;           /* key prefix, e.g. "model.diffusion_model." (static) */
+    int in_ch, out_ch, model_ch;  /* 4 or 9, 4, 320 */
+    int levels;                   /* len(channel_mult) */
+    int mult[G3D_SD_MAX_LEVELS];  /* channel multipliers (1, 2, 4, 4) */
+    int nres[G3D_SD_MAX_LEVELS];  /* res blocks per level (2) */
+    int attn[G3D_SD_MAX_LEVELS];  /* 1 where the level's res blocks have a transformer */
+    int depth;                    /* transformer blocks per spatial transformer (1) */
+    int context_dim;              /* 768 (SD 1.x), 1024 (SD 2.x) */
+    int heads;                    /* fixed head count (SD 1.x: 8), or 0 ... */
+    int head_dim;                 /* ... fixed channels per head (SD 2.x: 64) */
+    int linear_proj;              /* 1: Linear proj_in / proj_out (SD 2.x), 0: 1x1 convolutions */
+    g3d_sd_pred pred;
+    int family;                   /* 1 or 2 (SD 1.x / 2.x), from the conventions above */
+} g3d_sd_unet_config;
+
+typedef struct g3d_sd_unet g3d_sd_unet;
+
+/* Reads the UNet's configuration from an open checkpoint (model.diffusion_model.* or, for a
+ * bare UNet state dict, no prefix). yaml, when not NULL, is the text of the original
+ * configuration file (v1-inference.yaml, v2-inference-v.yaml, ...): its num_heads,
+ * num_head_channels and parameterization are used, and its in_channels, context_dim and
+ * channel_mult must agree with the tensors. G3D_ERR_MODEL naming the first missing or
+ * mis-shaped tensor when the file is not a Stable Diffusion UNet. */
+g3d_status g3d_sd_unet_probe(const g3d_ckpt *ck, const char *yaml, g3d_sd_unet_config *c);
+/* Loads the UNet (the checkpoint must outlive it). Free with g3d_sd_unet_free. */
+g3d_status g3d_sd_unet_load(const g3d_ckpt *ck, const char *yaml, g3d_sd_unet **out);
+void g3d_sd_unet_free(g3d_sd_unet *m);
+const g3d_sd_unet_config *g3d_sd_unet_get_config(const g3d_sd_unet *m);
+/* "SD 1.x UNet (4 input channels, model channels 320, multipliers 1/2/4/4, 2 res blocks,
+ * attention at levels 0/1/2, context 768, 8 heads, 1x1-conv projections, epsilon)" into buf. */
+const char *g3d_sd_unet_describe(const g3d_sd_unet_config *c, char *buf, size_t n);
+
+/* Receives named intermediate results while a network runs (tests compare them with the
+ * official code's): a [c, h, w] map, or a vector (h = w = 1). Names: "temb", "in<i>", "mid",
+ * "out<i>" for the UNet; "enc_mid", "moments", "dec_conv_in", "dec_mid", "dec_up<level>"
+ * for the VAE. */
+typedef void (*g3d_sd_trace_fn)(void *ctx, const char *name, const float *x, int c, int h, int w);
+
+/* out [out_ch, h, w] = the UNet at timestep t on x [in_ch, h, w] with the text context
+ * ctx [nctx, context_dim]. h and w must be multiples of 2^(levels-1). trace may be NULL. */
+g3d_status g3d_sd_unet_forward(const g3d_sd_unet *m, const float *x, int h, int w, float t, const float *ctx,
+                               int nctx, float *out, g3d_sd_trace_fn trace, void *trace_ctx);
+
+/* ---- VAE -------------------------------------------------------------------------------- */
+
+typedef struct g3d_sd_vae_config {
+    const char *prefix;          /* "first_stage_model." or "" */
+    int ch, levels, nres, z_ch;  /* 128, 4, 2, 4 for the published VAE */
+    int mult[G3D_SD_MAX_LEVELS]; /* 1, 2, 4, 4 */
+    int factor;                  /* picture pixels per latent pixel: 2^(levels-1) */
+} g3d_sd_vae_config;
+
+typedef struct g3d_sd_vae g3d_sd_vae;
+
+/* Reads / loads the VAE from an open checkpoint (first_stage_model.* or a bare state dict);
+ * the same errors as the UNet. */
+g3d_status g3d_sd_vae_probe(const g3d_ckpt *ck, g3d_sd_vae_config *c);
+g3d_status g3d_sd_vae_load(const g3d_ckpt *ck, g3d_sd_vae **out);
+void g3d_sd_vae_free(g3d_sd_vae *m);
+const g3d_sd_vae_config *g3d_sd_vae_get_config(const g3d_sd_vae *m);
+
+/* Encoder: rgb [3, H, W] in [-1, 1] -> moments [2 z_ch, H/f, W/f] (the posterior's mean, then
+ * its log-variance, after quant_conv). H, W multiples of the factor f. */
+g3d_status g3d_sd_vae_encode(const g3d_sd_vae *m, const float *rgb, int H, int W, float *moments,
+                             g3d_sd_trace_fn trace, void *trace_ctx);
+/* Decoder: z [z_ch, h, w] (unscaled: latent / G3D_SD_VAE_SCALE) -> rgb [3, h f, w f]. */
+g3d_status g3d_sd_vae_decode(const g3d_sd_vae *m, const float *z, int h, int w, float *rgb,
+                             g3d_sd_trace_fn trace, void *trace_ctx);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* G3D_SD_H */

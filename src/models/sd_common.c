@@ -1,0 +1,183 @@
+/* Tensor look-up and the residual block shared by the Stable Diffusion UNet and VAE. */
+#include "sd_int.h"
+
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+const g3d_tensor_info *sd_find(const sd_ld *ld, const char *fmt, ...)
+{
+    char name[256], full[384];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(name, sizeof name, fmt, ap);
+    va_end(ap);
+    snprintf(full, sizeof full, "%s%s", ld->prefix, name);
+    return g3d_ckpt_find(ld->ck, full);
+}
+
+static void shape_str(char *b, size_t n, int ndim, const int64_t *s)
+{
+    size_t k = (size_t)snprintf(b, n, "[");
+    for (int i = 0; i < ndim && k < n; i++) k += (size_t)snprintf(b + k, n - k, "%s%lld", i ? ", " : "", (long long)s[i]);
+    if (k < n) snprintf(b + k, n - k, "]");
+}
+
+g3d_status sd_need(const sd_ld *ld, const g3d_tensor_info **t, int ndim, const int64_t *shape, const char *name)
+{
+    const g3d_tensor_info *x = sd_find(ld, "%s", name);
+    *t = x;
+    if (!x) return G3D_ERR(G3D_ERR_MODEL, "%s: missing tensor %s%s", g3d_ckpt_path(ld->ck), ld->prefix, name);
+    int ok = x->ndim == ndim;
+    for (int i = 0; ok && i < ndim; i++) ok = x->shape[i] == shape[i];
+    /* a 1x1 convolution read as a Linear layer */
+    if (!ok && ndim == 2 && x->ndim == 4 && x->shape[2] == 1 && x->shape[3] == 1)
+        ok = x->shape[0] == shape[0] && x->shape[1] == shape[1];
+    if (ok && x->dtype != G3D_DT_F32 && x->dtype != G3D_DT_F16 && x->dtype != G3D_DT_BF16)
+        return G3D_ERR(G3D_ERR_MODEL, "%s: tensor %s%s is %s (F32, F16 or BF16 expected)", g3d_ckpt_path(ld->ck),
+                       ld->prefix, name, g3d_dtype_name(x->dtype));
+    if (!ok) {
+        char got[96], want[96];
+        shape_str(got, sizeof got, x->ndim, x->shape);
+        shape_str(want, sizeof want, ndim, shape);
+        return G3D_ERR(G3D_ERR_MODEL, "%s: tensor %s%s has shape %s, expected %s", g3d_ckpt_path(ld->ck), ld->prefix,
+                       name, got, want);
+    }
+    return G3D_OK;
+}
+
+g3d_status sd_vec(const sd_ld *ld, float **dst, int n, const char *base, const char *leaf)
+{
+    char name[256];
+    const g3d_tensor_info *t;
+    int64_t s = n;
+    snprintf(name, sizeof name, "%s.%s", base, leaf);
+    G3D_TRY(sd_need(ld, &t, 1, &s, name));
+    if (!(*dst = malloc(sizeof(float) * (size_t)n))) return G3D_ERR(G3D_ERR_NOMEM, "out of memory loading %s", name);
+    g3d_dtype_to_f32(t->dtype, t->data, *dst, n);
+    return G3D_OK;
+}
+
+g3d_status sd_conv_load(const sd_ld *ld, g3d_nn_conv *c, int cin, int cout, int k, int stride, const char *base)
+{
+    char name[256];
+    const g3d_tensor_info *t;
+    int64_t s[4] = {cout, cin, k, k};
+    memset(c, 0, sizeof *c);
+    snprintf(name, sizeof name, "%s.weight", base);
+    G3D_TRY(sd_need(ld, &t, 4, s, name));
+    c->cin = cin;
+    c->cout = cout;
+    c->kh = c->kw = k;
+    c->stride = stride;
+    c->pad_h = c->pad_w = k / 2;
+    c->w = t->data;
+    c->wtype = t->dtype;
+    float *b = NULL;
+    G3D_TRY(sd_vec(ld, &b, cout, base, "bias"));
+    c->b = b;
+    return G3D_OK;
+}
+
+void sd_conv_free(g3d_nn_conv *c)
+{
+    g3d_nn_conv_release(c);
+    free((void *)c->b);
+    c->b = NULL;
+}
+
+g3d_status sd_lin_load(const sd_ld *ld, g3d_nn_lin *L, int out, int in, int bias, const char *base)
+{
+    char name[256];
+    const g3d_tensor_info *t;
+    int64_t s[2] = {out, in};
+    float *b = NULL;
+    snprintf(name, sizeof name, "%s.weight", base);
+    G3D_TRY(sd_need(ld, &t, 2, s, name));
+    if (bias) G3D_TRY(sd_vec(ld, &b, out, base, "bias"));
+    g3d_status rc = g3d_nn_lin_init(L, t->data, t->dtype, b, out, in, t->dtype);
+    free(b);
+    return rc;
+}
+
+g3d_status sd_res_load(const sd_ld *ld, sd_res *r, int cin, int cout, int emb_dim, float eps, const char *base)
+{
+    char n[256];
+    int unet = emb_dim > 0;
+    memset(r, 0, sizeof *r);
+    r->eps = eps;
+    r->cin = cin;
+    if (cout < 0) {
+        const g3d_tensor_info *w = sd_find(ld, "%s.%s.weight", base, unet ? "in_layers.2" : "conv1");
+        cout = w && w->ndim == 4 ? (int)w->shape[0] : cin;
+    }
+    r->cout = cout;
+    snprintf(n, sizeof n, "%s.%s", base, unet ? "in_layers.0" : "norm1");
+    G3D_TRY(sd_vec(ld, &r->g1, cin, n, "weight"));
+    G3D_TRY(sd_vec(ld, &r->b1, cin, n, "bias"));
+    snprintf(n, sizeof n, "%s.%s", base, unet ? "in_layers.2" : "conv1");
+    G3D_TRY(sd_conv_load(ld, &r->c1, cin, cout, 3, 1, n));
+    if (unet) {
+        snprintf(n, sizeof n, "%s.emb_layers.1", base);
+        G3D_TRY(sd_lin_load(ld, &r->emb, cout, emb_dim, 1, n));
+        r->has_emb = 1;
+    }
+    snprintf(n, sizeof n, "%s.%s", base, unet ? "out_layers.0" : "norm2");
+    G3D_TRY(sd_vec(ld, &r->g2, cout, n, "weight"));
+    G3D_TRY(sd_vec(ld, &r->b2, cout, n, "bias"));
+    snprintf(n, sizeof n, "%s.%s", base, unet ? "out_layers.3" : "conv2");
+    G3D_TRY(sd_conv_load(ld, &r->c2, cout, cout, 3, 1, n));
+    if (cin != cout) {
+        snprintf(n, sizeof n, "%s.%s", base, unet ? "skip_connection" : "nin_shortcut");
+        G3D_TRY(sd_conv_load(ld, &r->skip, cin, cout, 1, 1, n));
+        r->has_skip = 1;
+    }
+    return G3D_OK;
+}
+
+void sd_res_free(sd_res *r)
+{
+    free(r->g1);
+    free(r->b1);
+    free(r->g2);
+    free(r->b2);
+    sd_conv_free(&r->c1);
+    sd_conv_free(&r->c2);
+    sd_conv_free(&r->skip);
+    if (r->has_emb) g3d_nn_lin_free(&r->emb);
+}
+
+g3d_status sd_res_forward(const sd_res *r, const float *x, int h, int w, const float *emb_silu, float *y, float *tmp)
+{
+    int hw = h * w;
+    int big = r->cin > r->cout ? r->cin : r->cout;
+    float *t = tmp, *eb = tmp + (size_t)big * hw;
+    g3d_nn_groupnorm(x, r->cin, hw, 32, r->g1, r->b1, r->eps, G3D_ACT_SILU, t);
+    g3d_nn_conv c1 = r->c1;
+    if (r->has_emb) {
+        /* the embedding's projection is a per-channel constant: it joins the convolution's bias */
+        G3D_TRY(g3d_nn_lin_forward(&r->emb, emb_silu, 1, 0, eb, 0, NULL));
+        for (int i = 0; i < r->cout; i++) eb[i] += r->c1.b[i];
+        c1.b = eb;
+    }
+    G3D_TRY(g3d_nn_conv_forward(&c1, t, h, w, y, NULL));
+    g3d_nn_groupnorm(y, r->cout, hw, 32, r->g2, r->b2, r->eps, G3D_ACT_SILU, t);
+    const float *res = x;
+    if (r->has_skip) {
+        G3D_TRY(g3d_nn_conv_forward(&r->skip, x, h, w, y, NULL));
+        res = y;
+    }
+    g3d_nn_epi e = {.res = res};
+    return g3d_nn_conv_forward(&r->c2, t, h, w, y, &e);
+}
+
+void sd_transpose(const float *x, int r, int s, float *y, int add)
+{
+    for (int i = 0; i < r; i++)
+        for (int j = 0; j < s; j++) {
+            float v = x[(size_t)i * s + j];
+            if (add) y[(size_t)j * r + i] += v;
+            else y[(size_t)j * r + i] = v;
+        }
+}
