@@ -106,12 +106,91 @@ TEST(sd2_inpainting_unet)
     free(yaml);
 }
 
+TEST(vae)
+{
+    g3d_ckpt *ck = NULL;
+    g3d_sd_vae *m = NULL;
+    CHECK_OK(g3d_ckpt_open(test_fixture("sdunet_vae_tiny.safetensors"), &ck));
+    if (ck) CHECK_OK(g3d_sd_vae_load(ck, &m));
+    if (!m) {
+        g3d_ckpt_free(ck);
+        return;
+    }
+    const g3d_sd_vae_config *c = g3d_sd_vae_get_config(m);
+    CHECK(c->ch == 32 && c->levels == 2 && c->mult[1] == 2 && c->nres == 1 && c->z_ch == 4 && c->factor == 2 &&
+          !strcmp(c->prefix, "first_stage_model."));
+    float *img = golden("vae.image", NULL), *z = golden("vae.z", NULL);
+    float *mom = malloc(sizeof(float) * 8 * 8 * 12), *rgb = malloc(sizeof(float) * 3 * 16 * 24);
+    trace_ctx tc = {"vae", 0};
+    if (img && z && mom && rgb) {
+        CHECK_OK(g3d_sd_vae_encode(m, img, 16, 24, mom, on_trace, &tc));
+        CHECK(tc.compared == 2);
+        /* the decoder from the official latent (the posterior's mode) */
+        tc.compared = 0;
+        CHECK_OK(g3d_sd_vae_decode(m, z, 8, 12, rgb, on_trace, &tc));
+        golden_compare(g_act, "vae.decoded", rgb, 3 * 16 * 24);
+        CHECK(tc.compared == 4);
+        CHECK_FAILS(g3d_sd_vae_encode(m, img, 15, 24, mom, NULL, NULL));
+    }
+    free(img);
+    free(z);
+    free(mom);
+    free(rgb);
+    g3d_sd_vae_free(m);
+    g3d_ckpt_free(ck);
+}
+
+TEST(bad_input)
+{
+    g3d_ckpt *ck = NULL;
+    g3d_sd_unet *m = NULL;
+    g3d_sd_vae *v = NULL;
+    /* another model: refused, naming what a Stable Diffusion file would hold */
+    CHECK_OK(g3d_ckpt_open(test_fixture("dav2_tiny.pth"), &ck));
+    if (ck) {
+        CHECK_FAILS(g3d_sd_unet_load(ck, NULL, &m));
+        CHECK(strstr(g3d_error_message(), "input_blocks.0.0.weight") != NULL);
+        CHECK_FAILS(g3d_sd_vae_load(ck, &v));
+        CHECK(strstr(g3d_error_message(), "encoder.conv_in.weight") != NULL);
+    }
+    g3d_ckpt_free(ck);
+    ck = NULL;
+    /* a tensor missing deep inside: named */
+    unsigned char *file = NULL;
+    size_t n;
+    CHECK_OK(g3d_read_file(test_fixture("sdunet_sd2_tiny.safetensors"), 4 << 20, &file, &n));
+    const char *gone = "model.diffusion_model.output_blocks.4.1.transformer_blocks.0.attn2.to_v.weight";
+    unsigned char *bad = file ? golden_edit_safetensors(file, n, gone) : NULL;
+    if (bad) CHECK_OK(g3d_ckpt_open_memory(bad, n, "edited.safetensors", &ck));
+    if (ck) {
+        CHECK_FAILS(g3d_sd_unet_load(ck, "num_head_channels: 16", &m));
+        CHECK(strstr(g3d_error_message(), gone) != NULL);
+        /* a yaml that contradicts the tensors */
+        CHECK_FAILS(g3d_sd_unet_probe(ck, "in_channels: 4\nnum_head_channels: 16\n", &(g3d_sd_unet_config){0}));
+    }
+    g3d_ckpt_free(ck);
+    free(bad);
+    free(file);
+    CHECK(m == NULL && v == NULL);
+    /* latent sizes the levels cannot halve */
+    CHECK_OK(g3d_ckpt_open(test_fixture("sdunet_sd1_tiny.ckpt"), &ck));
+    if (ck) CHECK_OK(g3d_sd_unet_load(ck, NULL, &m));
+    if (m) {
+        float x[4 * 6 * 6] = {0}, ctx[48] = {0}, out[4 * 6 * 6];
+        CHECK_FAILS(g3d_sd_unet_forward(m, x, 6, 6, 1.0f, ctx, 1, out, NULL, NULL));
+    }
+    g3d_sd_unet_free(m);
+    g3d_ckpt_free(ck);
+}
+
 int main(void)
 {
     CHECK_OK(g3d_ckpt_open(test_fixture("sdunet_tiny_golden.safetensors"), &g_act));
     if (g_act) {
         RUN(sd1_unet);
         RUN(sd2_inpainting_unet);
+        RUN(vae);
+        RUN(bad_input);
     }
     g3d_ckpt_free(g_act);
     return test_summary();
