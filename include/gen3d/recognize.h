@@ -20,6 +20,8 @@ typedef enum g3d_model_kind {
                                     generation: its loader says what it cannot handle) */
     G3D_MODEL_CLIP_TEXT,         /* a CLIP text tower (clip_text.h), alone or inside a Stable
                                     Diffusion checkpoint (cond_stage_model.*) */
+    G3D_MODEL_STABLE_DIFFUSION,  /* a latent-diffusion UNet (model.diffusion_model.*, sd.h), with
+                                    or without its VAE and text encoder */
     G3D_MODEL_KIND_COUNT
 } g3d_model_kind;
 

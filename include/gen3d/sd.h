@@ -66,6 +66,10 @@ typedef struct g3d_sd_unet g3d_sd_unet;
  * channel_mult must agree with the tensors. G3D_ERR_MODEL naming the first missing or
  * mis-shaped tensor when the file is not a Stable Diffusion UNet. */
 g3d_status g3d_sd_unet_probe(const g3d_ckpt *ck, const char *yaml, g3d_sd_unet_config *c);
+/* The original configuration published beside a single-file checkpoint: the text of the file
+ * with the same name and .yaml in place of the extension (model.ckpt -> model.yaml), malloc'd,
+ * or NULL when there is none. */
+char *g3d_sd_yaml_beside(const char *model_path);
 /* Loads the UNet (the checkpoint must outlive it). Free with g3d_sd_unet_free. */
 g3d_status g3d_sd_unet_load(const g3d_ckpt *ck, const char *yaml, g3d_sd_unet **out);
 void g3d_sd_unet_free(g3d_sd_unet *m);

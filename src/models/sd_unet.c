@@ -141,6 +141,27 @@ g3d_status g3d_sd_unet_probe(const g3d_ckpt *ck, const char *yaml, g3d_sd_unet_c
     return G3D_OK;
 }
 
+char *g3d_sd_yaml_beside(const char *model_path)
+{
+    size_t n = strlen(model_path);
+    const char *dot = strrchr(model_path, '.'), *slash = strrchr(model_path, '/');
+    if (!dot || (slash && dot < slash)) dot = model_path + n;
+    char *y = malloc((size_t)(dot - model_path) + 6);
+    if (!y) return NULL;
+    memcpy(y, model_path, (size_t)(dot - model_path));
+    strcpy(y + (dot - model_path), ".yaml");
+    unsigned char *text = NULL;
+    size_t len;
+    FILE *f = fopen(y, "rb");
+    if (f) fclose(f);
+    if (!f || g3d_read_file(y, 1 << 20, &text, &len) != G3D_OK) {
+        g3d_error_clear();
+        text = NULL;
+    }
+    free(y);
+    return (char *)text;
+}
+
 const char *g3d_sd_unet_describe(const g3d_sd_unet_config *c, char *buf, size_t n)
 {
     char mult[64] = "", nres[64] = "", attn[64] = "";
