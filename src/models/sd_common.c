@@ -101,6 +101,37 @@ g3d_status sd_lin_load(const sd_ld *ld, g3d_nn_lin *L, int out, int in, int bias
     return rc;
 }
 
+g3d_status sd_lin_packed(const sd_ld *ld, g3d_nn_lin *L, int parts, int out, int in, int bias, const char *base,
+                         const char *const *leaves)
+{
+    char n[320];
+    size_t blk = (size_t)out * in;
+    float *w = malloc(sizeof(float) * blk * parts), *b = bias ? malloc(sizeof(float) * (size_t)out * parts) : NULL;
+    g3d_status rc = w && (b || !bias) ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory loading %s", base);
+    g3d_dtype store = G3D_DT_F32;
+    for (int k = 0; k < parts && rc == G3D_OK; k++) {
+        const g3d_tensor_info *t;
+        int64_t s[2] = {out, in};
+        snprintf(n, sizeof n, "%s.%s.weight", base, leaves[k]);
+        rc = sd_need(ld, &t, 2, s, n);
+        if (rc != G3D_OK) break;
+        g3d_dtype_to_f32(t->dtype, t->data, w + k * blk, (int64_t)blk);
+        store = t->dtype;
+        if (bias) {
+            float *bk = NULL;
+            snprintf(n, sizeof n, "%s.%s", base, leaves[k]);
+            rc = sd_vec(ld, &bk, out, n, "bias");
+            if (rc == G3D_OK) memcpy(b + (size_t)k * out, bk, sizeof(float) * out);
+            free(bk);
+        }
+    }
+    /* 16-bit weights stay 16-bit in the packed panels (the same values) */
+    if (rc == G3D_OK) rc = g3d_nn_lin_init(L, w, G3D_DT_F32, b, parts * out, in, store);
+    free(w);
+    free(b);
+    return rc;
+}
+
 g3d_status sd_res_load(const sd_ld *ld, sd_res *r, int cin, int cout, int emb_dim, float eps, const char *base)
 {
     char n[256];

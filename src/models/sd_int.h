@@ -27,6 +27,11 @@ void sd_conv_free(g3d_nn_conv *c);
  * when bias is set, <base>.bias; kept in the file's 16-bit type when it has one. */
 g3d_status sd_lin_load(const sd_ld *ld, g3d_nn_lin *L, int out, int in, int bias, const char *base);
 
+/* Several Linear layers of the same shape [out, in] stacked into one [parts*out, in] layer (q, k
+ * and v read with one product): <base>.<leaves[k]>.weight (and .bias when bias is set). */
+g3d_status sd_lin_packed(const sd_ld *ld, g3d_nn_lin *L, int parts, int out, int in, int bias, const char *base,
+                         const char *const *leaves);
+
 /* The residual block of both networks: GroupNorm 32 + SiLU, 3x3 conv, (+ a projection of the
  * timestep embedding), GroupNorm 32 + SiLU, 3x3 conv, plus the input (through a 1x1 conv when
  * the channel count changes). */

@@ -214,36 +214,17 @@ static g3d_status st_load(const sd_ld *ld, const g3d_sd_unet_config *c, sd_st *s
         }
         t = sd_find(ld, "%s.transformer_blocks.%d.ff.net.0.proj.weight", base, d);
         b->ff = t && t->ndim == 2 ? (int)t->shape[0] / 2 : 4 * D;
-        /* self-attention's q, k and v projections (no bias) as one packed layer */
-        float *w = malloc(sizeof(float) * 3 * (size_t)D * D);
-        if (!w) return G3D_ERR(G3D_ERR_NOMEM, "out of memory loading the UNet");
-        g3d_dtype store = G3D_DT_F32;
-        g3d_status rc = G3D_OK;
-        for (int k = 0; k < 3 && rc == G3D_OK; k++) {
-            int64_t sh[2] = {D, D};
-            snprintf(n, sizeof n, "%s.transformer_blocks.%d.attn1.to_%c.weight", base, d, "qkv"[k]);
-            rc = sd_need(ld, &t, 2, sh, n);
-            if (rc == G3D_OK) g3d_dtype_to_f32(t->dtype, t->data, w + (size_t)k * D * D, (int64_t)D * D), store = t->dtype;
-        }
-        if (rc == G3D_OK) rc = g3d_nn_lin_init(&b->qkv, w, G3D_DT_F32, NULL, 3 * D, D, store);
-        free(w);
-        G3D_TRY(rc);
+        static const char *const qkv[] = {"to_q", "to_k", "to_v"};
+        /* self-attention's q, k and v (no bias) as one layer */
+        snprintf(n, sizeof n, "%s.transformer_blocks.%d.attn1", base, d);
+        G3D_TRY(sd_lin_packed(ld, &b->qkv, 3, D, D, 0, n, qkv));
         snprintf(n, sizeof n, "%s.transformer_blocks.%d.attn1.to_out.0", base, d);
         G3D_TRY(sd_lin_load(ld, &b->out1, D, D, 1, n));
         snprintf(n, sizeof n, "%s.transformer_blocks.%d.attn2.to_q", base, d);
         G3D_TRY(sd_lin_load(ld, &b->q2, D, D, 0, n));
-        /* cross-attention's k and v read the text context: one packed layer too */
-        int C = c->context_dim;
-        if (!(w = malloc(sizeof(float) * 2 * (size_t)D * C))) return G3D_ERR(G3D_ERR_NOMEM, "out of memory loading the UNet");
-        for (int k = 0; k < 2 && rc == G3D_OK; k++) {
-            int64_t sh[2] = {D, C};
-            snprintf(n, sizeof n, "%s.transformer_blocks.%d.attn2.to_%c.weight", base, d, "kv"[k]);
-            rc = sd_need(ld, &t, 2, sh, n);
-            if (rc == G3D_OK) g3d_dtype_to_f32(t->dtype, t->data, w + (size_t)k * D * C, (int64_t)D * C), store = t->dtype;
-        }
-        if (rc == G3D_OK) rc = g3d_nn_lin_init(&b->kv2, w, G3D_DT_F32, NULL, 2 * D, C, store);
-        free(w);
-        G3D_TRY(rc);
+        /* cross-attention's k and v read the text context: one layer too */
+        snprintf(n, sizeof n, "%s.transformer_blocks.%d.attn2", base, d);
+        G3D_TRY(sd_lin_packed(ld, &b->kv2, 2, D, c->context_dim, 0, n, qkv + 1));
         snprintf(n, sizeof n, "%s.transformer_blocks.%d.attn2.to_out.0", base, d);
         G3D_TRY(sd_lin_load(ld, &b->out2, D, D, 1, n));
         snprintf(n, sizeof n, "%s.transformer_blocks.%d.ff.net.0.proj", base, d);

@@ -78,27 +78,8 @@ static g3d_status attn_load(const sd_ld *ld, vae_attn *a, int c, const char *bas
     snprintf(n, sizeof n, "%s.norm", base);
     G3D_TRY(sd_vec(ld, &a->g, c, n, "weight"));
     G3D_TRY(sd_vec(ld, &a->b, c, n, "bias"));
-    float *w = malloc(sizeof(float) * 3 * (size_t)c * c), *b = malloc(sizeof(float) * 3 * (size_t)c);
-    g3d_status rc = w && b ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory loading the VAE");
-    g3d_dtype store = G3D_DT_F32;
-    for (int k = 0; k < 3 && rc == G3D_OK; k++) {
-        const g3d_tensor_info *t;
-        int64_t s[2] = {c, c};
-        float *bk = NULL;
-        snprintf(n, sizeof n, "%s.%c.weight", base, "qkv"[k]);
-        rc = sd_need(ld, &t, 2, s, n);
-        if (rc != G3D_OK) break;
-        g3d_dtype_to_f32(t->dtype, t->data, w + (size_t)k * c * c, (int64_t)c * c);
-        store = t->dtype;
-        snprintf(n, sizeof n, "%s.%c", base, "qkv"[k]);
-        rc = sd_vec(ld, &bk, c, n, "bias");
-        if (rc == G3D_OK) memcpy(b + (size_t)k * c, bk, sizeof(float) * c);
-        free(bk);
-    }
-    if (rc == G3D_OK) rc = g3d_nn_lin_init(&a->qkv, w, G3D_DT_F32, b, 3 * c, c, store);
-    free(w);
-    free(b);
-    G3D_TRY(rc);
+    static const char *const qkv[] = {"q", "k", "v"};
+    G3D_TRY(sd_lin_packed(ld, &a->qkv, 3, c, c, 1, base, qkv));
     snprintf(n, sizeof n, "%s.proj_out", base);
     return sd_lin_load(ld, &a->proj, c, c, 1, n);
 }
