@@ -115,6 +115,60 @@ g3d_status g3d_sd_vae_encode(const g3d_sd_vae *m, const float *rgb, int H, int W
 g3d_status g3d_sd_vae_decode(const g3d_sd_vae *m, const float *z, int h, int w, float *rgb,
                              g3d_sd_trace_fn trace, void *trace_ctx);
 
+/* ---- samplers --------------------------------------------------------------------------- */
+/* The noise schedule is Stable Diffusion's: 1000 steps, betas = linspace(sqrt 0.00085,
+ * sqrt 0.012)^2, alphas_cumprod in float32 as ldm stores them. */
+#define G3D_SD_TRAIN_STEPS 1000
+
+typedef enum g3d_sd_sampler_kind {
+    G3D_SD_DDIM,     /* ldm's DDIMSampler: timesteps 1000/N apart from 1, eta */
+    G3D_SD_EULER,    /* k-diffusion sample_euler */
+    G3D_SD_EULER_A,  /* k-diffusion sample_euler_ancestral (eta 1) */
+    G3D_SD_DPMPP_2M, /* k-diffusion sample_dpmpp_2m */
+    G3D_SD_SAMPLER_COUNT
+} g3d_sd_sampler_kind;
+
+/* "ddim", "euler", "euler_a", "dpmpp_2m" (also "dpm++2m"); -1 if unknown. */
+int g3d_sd_sampler_parse(const char *name);
+const char *g3d_sd_sampler_name(g3d_sd_sampler_kind k);
+
+typedef struct g3d_sd_sampler {
+    g3d_sd_sampler_kind kind;
+    int steps;       /* N >= 1 (DDIM may run a few more: ldm's spacing, see g3d_sd_ddim_timesteps) */
+    float eta;       /* DDIM only: 0 deterministic, 1 DDPM-like */
+    int karras;      /* k-diffusion samplers: Karras et al.'s sigmas (rho 7) instead of the discrete ones */
+    g3d_sd_pred pred;
+} g3d_sd_sampler;
+
+/* alphas_cumprod[1000] of the schedule (float32 values). */
+void g3d_sd_alphas_cumprod(float *ac);
+/* DDIM's timesteps for N steps in sampling order (981, 961, ..., 1 for 50): ldm's "uniform"
+ * spacing range(0, 1000, 1000 // N) + 1, which gives more than N steps when N does not divide
+ * 1000 (7 -> 8). t holds 1000 entries; returns the count. */
+int g3d_sd_ddim_timesteps(int steps, int *t);
+/* k-diffusion's sigmas for N steps, then a final 0: sigmas[N + 1]. Discrete: CompVisDenoiser's
+ * get_sigmas (log-sigma interpolation of 1000 training levels from t = 999 down to 0); Karras:
+ * get_sigmas_karras between the smallest and the largest training sigma. */
+void g3d_sd_sigmas(int steps, int karras, float *sigmas);
+
+/* The network: out[n] = the model's prediction (eps or v, guidance already applied) for the
+ * latent x[n] at timestep t (fractional for the k-diffusion samplers). */
+typedef g3d_status (*g3d_sd_model_fn)(void *ctx, const float *x, float t, float *out);
+/* Fills z[n] with standard normal values (ancestral steps, DDIM with eta > 0). */
+typedef void (*g3d_sd_noise_fn)(void *ctx, float *z, size_t n);
+/* Called after step i (from 0) of `total` with the latent so far, which may be changed (latent
+ * blending for inpainting with a text-to-image model: known content noised to the level the
+ * next step expects is a x0 + b noise, with a = sqrt(alphas_cumprod) and b = sqrt(1 -
+ * alphas_cumprod) for DDIM, a = 1 and b = sigma for the others; a = 1, b = 0 after the last
+ * step). Non-zero cancels (G3D_CANCELLED). */
+typedef int (*g3d_sd_step_fn)(void *ctx, int i, int total, float *x, size_t n, float a, float b);
+
+/* Runs the sampler: x[n] holds the initial noise N(0, 1) on entry (scaled by the first sigma
+ * inside for the k-diffusion samplers) and the final latent on return. noise may be NULL for
+ * the deterministic samplers; step may be NULL. */
+g3d_status g3d_sd_sample(const g3d_sd_sampler *s, float *x, size_t n, g3d_sd_model_fn model, void *model_ctx,
+                         g3d_sd_noise_fn noise, void *noise_ctx, g3d_sd_step_fn step, void *step_ctx);
+
 #ifdef __cplusplus
 }
 #endif
