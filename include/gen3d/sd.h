@@ -27,6 +27,10 @@
 
 #include "gen3d/base.h"
 #include "gen3d/ckpt.h"
+#include "gen3d/image.h"
+#include "gen3d/providers.h"
+
+#include <stdint.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -168,6 +172,69 @@ typedef int (*g3d_sd_step_fn)(void *ctx, int i, int total, float *x, size_t n, f
  * the deterministic samplers; step may be NULL. */
 g3d_status g3d_sd_sample(const g3d_sd_sampler *s, float *x, size_t n, g3d_sd_model_fn model, void *model_ctx,
                          g3d_sd_noise_fn noise, void *noise_ctx, g3d_sd_step_fn step, void *step_ctx);
+
+/* ---- text-to-image and inpainting ---------------------------------------------------------
+ *
+ *   g3d_sd *sd;  g3d_image img = {0};
+ *   g3d_sd_load(&(g3d_sd_paths){.model = "v1-5-pruned-emaonly.safetensors"}, &sd);
+ *   g3d_sd_params p = g3d_sd_defaults();  p.prompt = "a cosy living room";  p.seed = 1;
+ *   g3d_sd_txt2img(sd, &p, &img);                       // 512 x 512 RGB in [0, 1]
+ */
+typedef struct g3d_sd_paths {
+    const char *model;        /* a single-file checkpoint (.safetensors / .ckpt) */
+    const char *vae;          /* another file's VAE (first_stage_model.* or bare), or NULL */
+    const char *text_encoder; /* another file's text encoder (clip_text.h), or NULL */
+    const char *tokenizer;    /* clip_text.h's g3d_clip_tokenizer_load path; NULL: the default vocabulary */
+    const char *yaml;         /* the original configuration; NULL: <model>.yaml when it exists */
+    int prediction;           /* -1: from the configuration (else epsilon), or a g3d_sd_pred */
+} g3d_sd_paths;
+
+typedef struct g3d_sd g3d_sd;
+
+/* Loads the UNet, the VAE, the text encoder and the tokenizer; refuses parts that do not fit
+ * together (the text width must be the UNet's context width) and weights that are not finite
+ * (naming the tensor). The model's files stay mapped until g3d_sd_free. */
+g3d_status g3d_sd_load(const g3d_sd_paths *p, g3d_sd **out);
+void g3d_sd_free(g3d_sd *m);
+const g3d_sd_unet_config *g3d_sd_get_unet(const g3d_sd *m);
+/* Picture sides must be multiples of this (the VAE's factor times the UNet's 2^(levels-1): 64 for SD). */
+int g3d_sd_size_multiple(const g3d_sd *m);
+
+typedef struct g3d_sd_params {
+    const char *prompt;       /* required */
+    const char *negative;     /* the unconditional prompt ("" when NULL) */
+    int width, height;        /* pixels */
+    g3d_sd_sampler sampler;
+    float cfg;                /* classifier-free guidance scale (1: the prompt alone, one pass a step) */
+    uint64_t seed;            /* the initial noise (and ancestral noise) */
+    const float *noise;       /* the initial latent noise [z_ch, height/f, width/f] instead of the seed's, or NULL */
+    g3d_progress progress;    /* stage "denoise": step, total */
+    int truncated;            /* out: prompt tokens dropped because they did not fit (both prompts) */
+    int fallback;             /* out, inpainting: 1 when a text-to-image model inpainted by latent blending */
+} g3d_sd_params;
+
+/* DDIM 50 steps, guidance 7.5, 512 x 512, seed 0. */
+g3d_sd_params g3d_sd_defaults(void);
+
+/* A picture for the prompt: out (allocated, RGB in [0, 1], width x height) from the VAE's
+ * decoding of the sampled latent (clamp((x + 1) / 2, 0, 1)). */
+g3d_status g3d_sd_txt2img(const g3d_sd *m, g3d_sd_params *p, g3d_image *out);
+
+/* Fills the masked pixels (mask (h, w, 1) > 0.5) of image (h, w, 3; p->width and p->height are
+ * taken from it) with content for the prompt; out is allocated. A published inpainting model
+ * (9 input channels) gets the noisy latent, the mask at latent resolution (nearest) and the
+ * latent of the masked picture, as ldm's inpainting scripts build them (the masked picture's
+ * latent is the posterior mean). A text-to-image model inpaints by latent blending: after
+ * every step the unmasked latent is replaced by the picture's latent noised to the next
+ * level (p->fallback is set). Then the known pixels are pasted back at full resolution with a
+ * seam feathered over 8 pixels inside the mask, so pixels outside the mask are unchanged. */
+g3d_status g3d_sd_inpaint(const g3d_sd *m, g3d_sd_params *p, const g3d_image *image, const g3d_image *mask,
+                          g3d_image *out);
+
+/* The inpainter plug-in (providers.h) on a loaded model (owned by the plug-in afterwards: it
+ * frees it): the picture is padded by repeating its edges to the size multiple, inpainted
+ * with `params` (prompt NULL means the plug-in call's prompt, else "") and cropped back. */
+g3d_status g3d_inpainter_sd_create(g3d_sd *model, const g3d_sd_params *params, g3d_inpainter *out);
 
 #ifdef __cplusplus
 }
