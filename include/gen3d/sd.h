@@ -200,6 +200,9 @@ const g3d_sd_unet_config *g3d_sd_get_unet(const g3d_sd *m);
 /* Picture sides must be multiples of this (the VAE's factor times the UNet's 2^(levels-1): 64 for SD). */
 int g3d_sd_size_multiple(const g3d_sd *m);
 
+/* How many tokens of `text` the text encoder's context cannot hold (0: it fits), in *dropped. */
+g3d_status g3d_sd_check_prompt(const g3d_sd *m, const char *text, int *dropped);
+
 typedef struct g3d_sd_params {
     const char *prompt;       /* required */
     const char *negative;     /* the unconditional prompt ("" when NULL) */

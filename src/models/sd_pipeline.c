@@ -127,6 +127,18 @@ int g3d_sd_size_multiple(const g3d_sd *m)
     return g3d_sd_vae_get_config(m->vae)->factor << (g3d_sd_unet_get_config(m->unet)->levels - 1);
 }
 
+g3d_status g3d_sd_check_prompt(const g3d_sd *m, const char *text, int *dropped)
+{
+    const g3d_clip_text_config *c = g3d_clip_text_get_config(m->text);
+    int32_t *ids = malloc(sizeof(int32_t) * (size_t)c->context);
+    g3d_clip_tokens info = {0};
+    if (!ids) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    g3d_status rc = g3d_clip_tokenize(m->tok, text, c->context, 0, ids, &info);
+    free(ids);
+    *dropped = info.dropped;
+    return rc;
+}
+
 g3d_sd_params g3d_sd_defaults(void)
 {
     g3d_sd_params p = {0};
@@ -154,14 +166,17 @@ typedef struct loop {
 static g3d_status encode_text(loop *L, const char *text, float **emb)
 {
     const g3d_clip_text_config *c = g3d_clip_text_get_config(L->m->text);
-    int32_t ids[1024];
-    g3d_clip_tokens info;
-    if (c->context > 1024) return G3D_ERR(G3D_ERR_MODEL, "text context %d too long", c->context);
-    G3D_TRY(g3d_clip_tokenize(L->m->tok, text ? text : "", c->context, g3d_clip_text_pad_id(L->m->text, L->m->tok), ids, &info));
+    g3d_clip_tokens info = {0};
+    int32_t *ids = malloc(sizeof(int32_t) * (size_t)c->context);
+    *emb = malloc(sizeof(float) * (size_t)c->context * c->width);
+    g3d_status rc = ids && *emb ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    if (rc == G3D_OK)
+        rc = g3d_clip_tokenize(L->m->tok, text ? text : "", c->context, g3d_clip_text_pad_id(L->m->text, L->m->tok), ids, &info);
     L->p->truncated += info.dropped;
     L->nctx = c->context;
-    if (!(*emb = malloc(sizeof(float) * (size_t)c->context * c->width))) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
-    return g3d_clip_text_forward(L->m->text, ids, c->context, *emb, NULL);
+    if (rc == G3D_OK) rc = g3d_clip_text_forward(L->m->text, ids, c->context, *emb, NULL);
+    free(ids);
+    return rc;
 }
 
 static g3d_status run_unet(loop *L, const float *x, float t, const float *ctx, float *out)
