@@ -1,6 +1,7 @@
 /* The text-to-image loop against the official pipeline (tests/fixtures/make_sdpipe_golden.py):
  * the tiny CLIP text encoder, a tiny SD 1.x UNet and the tiny VAE, DDIM 10 steps with guidance
- * 7.5 from the recorded initial noise, down to the 8-bit picture. Then inpainting (a text-to-
+ * 7.5 from the recorded initial noise, down to the 8-bit picture (the same seed giving the same
+ * bytes is checked by test_cli_sd.sh). Then inpainting (a text-to-
  * image model: latent blending, the known pixels kept), the inpainter plug-in, refusals. */
 #include "golden.h"
 
@@ -69,17 +70,6 @@ TEST(txt2img_matches_official)
         printf("  picture: max |difference| %.2e, %d of %d bytes off by more than 1\n", maxd, off, 16 * 24 * 3);
         CHECK(maxd < 1e-4 && off == 0);
     }
-    /* the same seed gives the same picture */
-    g3d_image a = {0}, b = {0};
-    p.noise = NULL;
-    p.seed = 5;
-    p.progress = (g3d_progress){0};
-    p.sampler.steps = 3;
-    CHECK_OK(g3d_sd_txt2img(g_sd, &p, &a));
-    CHECK_OK(g3d_sd_txt2img(g_sd, &p, &b));
-    CHECK(a.data && b.data && !memcmp(a.data, b.data, g3d_image_size(&a) * sizeof(float)));
-    g3d_image_free(&a);
-    g3d_image_free(&b);
     free(dec);
     g3d_image_free(&img);
 done:
@@ -101,7 +91,7 @@ TEST(inpaint_fallback_and_plugin)
         }
     g3d_sd_params p = g3d_sd_defaults();
     p.prompt = g_prompt;
-    p.sampler = (g3d_sd_sampler){G3D_SD_EULER_A, 4, 0, 1, G3D_SD_PRED_EPS};
+    p.sampler = (g3d_sd_sampler){G3D_SD_EULER_A, 2, 0, 1, G3D_SD_PRED_EPS};
     CHECK_OK(g3d_sd_inpaint(g_sd, &p, &img, &mask, &out));
     CHECK(p.fallback == 1);
     int same = 1, changed = 0;
