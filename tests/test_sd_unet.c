@@ -131,6 +131,24 @@ TEST(vae)
         golden_compare(g_act, "vae.decoded", rgb, 3 * 16 * 24);
         CHECK(tc.compared == 4);
         CHECK_FAILS(g3d_sd_vae_encode(m, img, 15, 24, mom, NULL, NULL));
+        /* tiled decoding: one tile covering the latent is the plain decoder; with 4 x 4 tiles
+         * sharing 2 latent pixels, a corner only one tile covers is that tile's own decoding */
+        float *t = malloc(sizeof(float) * 3 * 16 * 24), *zt = malloc(sizeof(float) * 4 * 4 * 4), *one = malloc(sizeof(float) * 3 * 8 * 8);
+        CHECK_OK(g3d_sd_vae_decode_tiled(m, z, 8, 12, 16, 4, t));
+        CHECK(t && !memcmp(t, rgb, sizeof(float) * 3 * 16 * 24));
+        CHECK_OK(g3d_sd_vae_decode_tiled(m, z, 8, 12, 4, 2, t));
+        for (int c = 0; c < 4; c++)
+            for (int y = 0; y < 4; y++) memcpy(zt + (c * 4 + y) * 4, z + (c * 8 + y) * 12, sizeof(float) * 4);
+        CHECK_OK(g3d_sd_vae_decode(m, zt, 4, 4, one, NULL, NULL));
+        int corner = 1;
+        for (int c = 0; c < 3; c++)
+            for (int y = 0; y < 4; y++)
+                for (int x = 0; x < 4; x++) corner &= fabsf(t[(c * 16 + y) * 24 + x] - one[(c * 8 + y) * 8 + x]) < 1e-6f;
+        CHECK(corner);
+        CHECK_FAILS(g3d_sd_vae_decode_tiled(m, z, 8, 12, 4, 4, t));
+        free(t);
+        free(zt);
+        free(one);
     }
     free(img);
     free(z);

@@ -119,6 +119,13 @@ g3d_status g3d_sd_vae_encode(const g3d_sd_vae *m, const float *rgb, int H, int W
 g3d_status g3d_sd_vae_decode(const g3d_sd_vae *m, const float *z, int h, int w, float *rgb,
                              g3d_sd_trace_fn trace, void *trace_ctx);
 
+/* The decoder on overlapping latent tiles of tile x tile (overlap latent pixels shared by
+ * neighbours, blended with linear ramps), for pictures whose whole-latent decoding would need
+ * too much memory. Each tile is decoded on its own (its GroupNorm statistics and mid-block
+ * attention see only the tile), which is what tiled decoders do; a tile covering the whole
+ * latent gives g3d_sd_vae_decode's result exactly. 0 < overlap < tile. */
+g3d_status g3d_sd_vae_decode_tiled(const g3d_sd_vae *m, const float *z, int h, int w, int tile, int overlap, float *rgb);
+
 /* ---- samplers --------------------------------------------------------------------------- */
 /* The noise schedule is Stable Diffusion's: 1000 steps, betas = linspace(sqrt 0.00085,
  * sqrt 0.012)^2, alphas_cumprod in float32 as ldm stores them. */

@@ -277,7 +277,9 @@ static g3d_status generate(loop *L, float *x, g3d_image *out)
     if (rc == G3D_OK && !rgb) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
     if (rc == G3D_OK) {
         for (size_t i = 0; i < n; i++) x[i] /= G3D_SD_VAE_SCALE;
-        rc = g3d_sd_vae_decode(m->vae, x, L->h, L->w, rgb, NULL, NULL);
+        /* above 768 x 768 pixels (SD's VAE) the whole-picture decoder's maps pass 2 GB: tiles */
+        if (L->h * L->w > 96 * 96) rc = g3d_sd_vae_decode_tiled(m->vae, x, L->h, L->w, 64, 16, rgb);
+        else rc = g3d_sd_vae_decode(m->vae, x, L->h, L->w, rgb, NULL, NULL);
     }
     if (rc == G3D_OK) rc = to_image(rgb, p->width, p->height, out);
     free(rgb);

@@ -367,3 +367,67 @@ g3d_status g3d_sd_vae_decode(const g3d_sd_vae *m, const float *z, int h, int w, 
     g3d_nn_arena_free(f.ar);
     return rc;
 }
+
+/* Tile origins along one side: n tiles of `tile` covering `size` with at least `overlap` shared. */
+static int tile_starts(int size, int tile, int overlap, int *o, int max)
+{
+    if (tile >= size) {
+        o[0] = 0;
+        return 1;
+    }
+    int n = 1 + (size - tile + (tile - overlap) - 1) / (tile - overlap);
+    if (n > max) n = max;
+    for (int i = 0; i < n; i++) o[i] = (int)((long)(size - tile) * i / (n - 1));
+    return n;
+}
+
+/* Weight of a picture position p in a tile [a, a + len) whose neighbours overlap it: a ramp up
+ * over the shared part at each inner edge. */
+static float ramp(int p, int a, int len, int lo_shared, int hi_shared)
+{
+    float wgt = 1.0f;
+    if (lo_shared > 0 && p - a < lo_shared) wgt = (float)(p - a + 1) / (float)(lo_shared + 1);
+    if (hi_shared > 0 && a + len - 1 - p < hi_shared) {
+        float v = (float)(a + len - p) / (float)(hi_shared + 1);
+        wgt = v < wgt ? v : wgt;
+    }
+    return wgt;
+}
+
+g3d_status g3d_sd_vae_decode_tiled(const g3d_sd_vae *m, const float *z, int h, int w, int tile, int overlap, float *rgb)
+{
+    if (tile < 1 || overlap < 0 || overlap >= tile) return G3D_ERR(G3D_ERR_ARG, "tile %d, overlap %d: 0 <= overlap < tile expected", tile, overlap);
+    int f = m->cfg.factor, zc = m->cfg.z_ch, oy[256], ox[256];
+    int ny = tile_starts(h, tile, overlap, oy, 256), nx = tile_starts(w, tile, overlap, ox, 256);
+    int th = tile < h ? tile : h, tw = tile < w ? tile : w;
+    size_t H = (size_t)h * f, W = (size_t)w * f;
+    float *zt = malloc(sizeof(float) * zc * th * tw), *rt = malloc(sizeof(float) * 3 * th * f * tw * f);
+    float *acc = calloc(H * W, sizeof(float));
+    g3d_status rc = zt && rt && acc ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory in the VAE");
+    if (rc == G3D_OK) memset(rgb, 0, sizeof(float) * 3 * H * W);
+    for (int iy = 0; rc == G3D_OK && iy < ny; iy++)
+        for (int ix = 0; rc == G3D_OK && ix < nx; ix++) {
+            for (int c = 0; c < zc; c++)
+                for (int y = 0; y < th; y++)
+                    memcpy(zt + ((size_t)c * th + y) * tw, z + ((size_t)c * h + oy[iy] + y) * w + ox[ix], sizeof(float) * tw);
+            rc = g3d_sd_vae_decode(m, zt, th, tw, rt, NULL, NULL);
+            if (rc != G3D_OK) break;
+            /* picture pixels shared with the previous / next tile along each axis */
+            int sy0 = iy ? (oy[iy - 1] + th - oy[iy]) * f : 0, sy1 = iy + 1 < ny ? (oy[iy] + th - oy[iy + 1]) * f : 0;
+            int sx0 = ix ? (ox[ix - 1] + tw - ox[ix]) * f : 0, sx1 = ix + 1 < nx ? (ox[ix] + tw - ox[ix + 1]) * f : 0;
+            int Y0 = oy[iy] * f, X0 = ox[ix] * f, TH = th * f, TW = tw * f;
+            for (int y = 0; y < TH; y++)
+                for (int x = 0; x < TW; x++) {
+                    float wgt = ramp(Y0 + y, Y0, TH, sy0, sy1) * ramp(X0 + x, X0, TW, sx0, sx1);
+                    size_t o = (size_t)(Y0 + y) * W + X0 + x;
+                    acc[o] += wgt;
+                    for (int c = 0; c < 3; c++) rgb[c * H * W + o] += wgt * rt[((size_t)c * TH + y) * TW + x];
+                }
+        }
+    for (size_t i = 0; rc == G3D_OK && i < H * W; i++)
+        for (int c = 0; c < 3; c++) rgb[c * H * W + i] /= acc[i];
+    free(zt);
+    free(rt);
+    free(acc);
+    return rc;
+}
