@@ -59,15 +59,17 @@ typedef struct g3d_sd_unet_config {
     int linear_proj;              /* 1: Linear proj_in / proj_out (SD 2.x), 0: 1x1 convolutions */
     g3d_sd_pred pred;
     int family;                   /* 1 or 2 (SD 1.x / 2.x), from the conventions above */
+    int diffusers;                /* 1: diffusers' key names (unet/diffusion_pytorch_model.*) */
 } g3d_sd_unet_config;
 
 typedef struct g3d_sd_unet g3d_sd_unet;
 
 /* Reads the UNet's configuration from an open checkpoint (model.diffusion_model.* or, for a
- * bare UNet state dict, no prefix). yaml, when not NULL, is the text of the original
- * configuration file (v1-inference.yaml, v2-inference-v.yaml, ...): its num_heads,
- * num_head_channels and parameterization are used, and its in_channels, context_dim and
- * channel_mult must agree with the tensors. G3D_ERR_MODEL naming the first missing or
+ * bare UNet state dict, no prefix; or diffusers' UNet2DConditionModel names). yaml, when not
+ * NULL, is the text of the original configuration file (v1-inference.yaml, v2-inference-v.yaml,
+ * ...): its num_heads, num_head_channels and parameterization are used, and its in_channels and
+ * context_dim must agree with the tensors; or, for the diffusers layout, unet/config.json (its
+ * attention_head_dim: the heads, per level when a list). G3D_ERR_MODEL naming the first missing or
  * mis-shaped tensor when the file is not a Stable Diffusion UNet. */
 g3d_status g3d_sd_unet_probe(const g3d_ckpt *ck, const char *yaml, g3d_sd_unet_config *c);
 /* The original configuration published beside a single-file checkpoint: the text of the file
@@ -97,6 +99,7 @@ g3d_status g3d_sd_unet_forward(const g3d_sd_unet *m, const float *x, int h, int 
 
 typedef struct g3d_sd_vae_config {
     const char *prefix;          /* "first_stage_model." or "" */
+    int diffusers;               /* 1: diffusers' AutoencoderKL names (vae/diffusion_pytorch_model.*) */
     int ch, levels, nres, z_ch;  /* 128, 4, 2, 4 for the published VAE */
     int mult[G3D_SD_MAX_LEVELS]; /* 1, 2, 4, 4 */
     int factor;                  /* picture pixels per latent pixel: 2^(levels-1) */
@@ -104,8 +107,8 @@ typedef struct g3d_sd_vae_config {
 
 typedef struct g3d_sd_vae g3d_sd_vae;
 
-/* Reads / loads the VAE from an open checkpoint (first_stage_model.* or a bare state dict);
- * the same errors as the UNet. */
+/* Reads / loads the VAE from an open checkpoint (first_stage_model.*, a bare state dict, or
+ * diffusers' names); the same errors as the UNet. */
 g3d_status g3d_sd_vae_probe(const g3d_ckpt *ck, g3d_sd_vae_config *c);
 g3d_status g3d_sd_vae_load(const g3d_ckpt *ck, g3d_sd_vae **out);
 void g3d_sd_vae_free(g3d_sd_vae *m);
@@ -188,7 +191,8 @@ g3d_status g3d_sd_sample(const g3d_sd_sampler *s, float *x, size_t n, g3d_sd_mod
  *   g3d_sd_txt2img(sd, &p, &img);                       // 512 x 512 RGB in [0, 1]
  */
 typedef struct g3d_sd_paths {
-    const char *model;        /* a single-file checkpoint (.safetensors / .ckpt) */
+    const char *model;        /* a single-file checkpoint (.safetensors / .ckpt), or a diffusers folder
+                                 (unet/, vae/, text_encoder/, tokenizer/, scheduler/ for the prediction type) */
     const char *vae;          /* another file's VAE (first_stage_model.* or bare), or NULL */
     const char *text_encoder; /* another file's text encoder (clip_text.h), or NULL */
     const char *tokenizer;    /* clip_text.h's g3d_clip_tokenizer_load path; NULL: the default vocabulary */

@@ -6,15 +6,135 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* A res block's leaf in diffusers' spelling: UNet (in_layers.0 ...) or VAE (nin_shortcut). */
+static const char *res_leaf(const char *rest, char *buf, size_t n)
+{
+    static const char *const map[][2] = {{"in_layers.0.", "norm1."},      {"in_layers.2.", "conv1."},
+                                         {"emb_layers.1.", "time_emb_proj."}, {"out_layers.0.", "norm2."},
+                                         {"out_layers.3.", "conv2."},     {"skip_connection.", "conv_shortcut."},
+                                         {"nin_shortcut.", "conv_shortcut."}};
+    for (size_t i = 0; i < sizeof map / sizeof *map; i++) {
+        size_t k = strlen(map[i][0]);
+        if (!strncmp(rest, map[i][0], k)) {
+            snprintf(buf, n, "%s%s", map[i][1], rest + k);
+            return buf;
+        }
+    }
+    return rest;
+}
+
+/* The VAE's AttnBlock leaves (norm, q, k, v, proj_out) in diffusers' current spelling. */
+static const char *attn_leaf(const char *rest, char *buf, size_t n)
+{
+    static const char *const map[][2] = {{"norm.", "group_norm."}, {"q.", "to_q."}, {"k.", "to_k."}, {"v.", "to_v."},
+                                         {"proj_out.", "to_out.0."}};
+    for (size_t i = 0; i < sizeof map / sizeof *map; i++) {
+        size_t k = strlen(map[i][0]);
+        if (!strncmp(rest, map[i][0], k)) {
+            snprintf(buf, n, "%s%s", map[i][1], rest + k);
+            return buf;
+        }
+    }
+    return rest;
+}
+
+static int unet_key(const sd_ld *ld, const char *name, char *out, size_t n)
+{
+    int i, j, off = 0;
+    char b[256];
+    if (!strncmp(name, "time_embed.0.", 13)) return snprintf(out, n, "time_embedding.linear_1.%s", name + 13) > 0;
+    if (!strncmp(name, "time_embed.2.", 13)) return snprintf(out, n, "time_embedding.linear_2.%s", name + 13) > 0;
+    if (!strncmp(name, "out.0.", 6)) return snprintf(out, n, "conv_norm_out.%s", name + 6) > 0;
+    if (!strncmp(name, "out.2.", 6)) return snprintf(out, n, "conv_out.%s", name + 6) > 0;
+    if (!strncmp(name, "input_blocks.0.0.", 17)) return snprintf(out, n, "conv_in.%s", name + 17) > 0;
+    int per = ld->nres + 1;
+    if (sscanf(name, "input_blocks.%d.%d.%n", &i, &j, &off) == 2 && off && i >= 1) {
+        const char *rest = name + off;
+        int L = (i - 1) / per, r = (i - 1) % per;
+        if (r == ld->nres) return j == 0 && !strncmp(rest, "op.", 3) && snprintf(out, n, "down_blocks.%d.downsamplers.0.conv.%s", L, rest + 3) > 0;
+        if (j == 0) return snprintf(out, n, "down_blocks.%d.resnets.%d.%s", L, r, res_leaf(rest, b, sizeof b)) > 0;
+        return j == 1 && snprintf(out, n, "down_blocks.%d.attentions.%d.%s", L, r, rest) > 0;
+    }
+    if (sscanf(name, "middle_block.%d.%n", &j, &off) == 1 && off) {
+        const char *rest = name + off;
+        if (j == 1) return snprintf(out, n, "mid_block.attentions.0.%s", rest) > 0;
+        return (j == 0 || j == 2) && snprintf(out, n, "mid_block.resnets.%d.%s", j / 2, res_leaf(rest, b, sizeof b)) > 0;
+    }
+    if (sscanf(name, "output_blocks.%d.%d.%n", &i, &j, &off) == 2 && off) {
+        const char *rest = name + off;
+        int L = i / per, r = i % per;
+        if (j == 0) return snprintf(out, n, "up_blocks.%d.resnets.%d.%s", L, r, res_leaf(rest, b, sizeof b)) > 0;
+        if (!strncmp(rest, "conv.", 5)) return snprintf(out, n, "up_blocks.%d.upsamplers.0.%s", L, rest) > 0;
+        return j == 1 && snprintf(out, n, "up_blocks.%d.attentions.%d.%s", L, r, rest) > 0;
+    }
+    return 0;
+}
+
+static int vae_key(const sd_ld *ld, const char *name, char *out, size_t n)
+{
+    int l, k, off = 0;
+    char b[256], side[8];
+    if (sscanf(name, "%7[a-z].%n", side, &off) != 1 || (strcmp(side, "encoder") && strcmp(side, "decoder"))) {
+        snprintf(out, n, "%s", name);
+        return 1;
+    }
+    const char *rest = name + off;
+    int dec = side[0] == 'd';
+    if (sscanf(rest, dec ? "up.%d.block.%d.%n" : "down.%d.block.%d.%n", &l, &k, &off) == 2 && off)
+        return snprintf(out, n, "%s.%s_blocks.%d.resnets.%d.%s", side, dec ? "up" : "down", dec ? ld->levels - 1 - l : l, k,
+                        res_leaf(rest + off, b, sizeof b)) > 0;
+    if (sscanf(rest, dec ? "up.%d.attn.%d.%n" : "down.%d.attn.%d.%n", &l, &k, &off) == 2 && off)
+        return snprintf(out, n, "%s.%s_blocks.%d.attentions.%d.%s", side, dec ? "up" : "down", dec ? ld->levels - 1 - l : l, k,
+                        attn_leaf(rest + off, b, sizeof b)) > 0;
+    if (sscanf(rest, dec ? "up.%d.upsample.%n" : "down.%d.downsample.%n", &l, &off) == 1 && off)
+        return snprintf(out, n, "%s.%s_blocks.%d.%s.0.%s", side, dec ? "up" : "down", dec ? ld->levels - 1 - l : l,
+                        dec ? "upsamplers" : "downsamplers", rest + off) > 0;
+    if (!strncmp(rest, "mid.block_", 10) && (rest[10] == '1' || rest[10] == '2') && rest[11] == '.')
+        return snprintf(out, n, "%s.mid_block.resnets.%d.%s", side, rest[10] - '1', res_leaf(rest + 12, b, sizeof b)) > 0;
+    if (!strncmp(rest, "mid.attn_1.", 11))
+        return snprintf(out, n, "%s.mid_block.attentions.0.%s", side, attn_leaf(rest + 11, b, sizeof b)) > 0;
+    if (!strncmp(rest, "norm_out.", 9)) return snprintf(out, n, "%s.conv_norm_out.%s", side, rest + 9) > 0;
+    snprintf(out, n, "%s", name);
+    return 1;
+}
+
+int sd_key(const sd_ld *ld, const char *name, char *key, size_t n)
+{
+    char k[320];
+    int ok = 1;
+    if (ld->layout == SD_DIFFUSERS_UNET) ok = unet_key(ld, name, k, sizeof k);
+    else if (ld->layout == SD_DIFFUSERS_VAE) ok = vae_key(ld, name, k, sizeof k);
+    else snprintf(k, sizeof k, "%s", name);
+    snprintf(key, n, "%s%s", ld->prefix, ok ? k : name);
+    return ok;
+}
+
+/* The tensor under its file key; diffusers' VAE attention also under its older names
+ * (query, key, value, proj_attn). */
+static const g3d_tensor_info *find_key(const sd_ld *ld, const char *name, char *key, size_t n)
+{
+    if (!sd_key(ld, name, key, n)) return NULL;
+    const g3d_tensor_info *t = g3d_ckpt_find(ld->ck, key);
+    if (t || ld->layout != SD_DIFFUSERS_VAE) return t;
+    static const char *const older[][2] = {{".to_q.", ".query."}, {".to_k.", ".key."}, {".to_v.", ".value."}, {".to_out.0.", ".proj_attn."}};
+    for (size_t i = 0; i < sizeof older / sizeof *older; i++) {
+        char *at = strstr(key, older[i][0]);
+        if (!at) continue;
+        char alt[384];
+        snprintf(alt, sizeof alt, "%.*s%s%s", (int)(at - key), key, older[i][1], at + strlen(older[i][0]));
+        return g3d_ckpt_find(ld->ck, alt);
+    }
+    return NULL;
+}
+
 const g3d_tensor_info *sd_find(const sd_ld *ld, const char *fmt, ...)
 {
-    char name[256], full[384];
+    char name[256], key[384];
     va_list ap;
     va_start(ap, fmt);
     vsnprintf(name, sizeof name, fmt, ap);
     va_end(ap);
-    snprintf(full, sizeof full, "%s%s", ld->prefix, name);
-    return g3d_ckpt_find(ld->ck, full);
+    return find_key(ld, name, key, sizeof key);
 }
 
 static void shape_str(char *b, size_t n, int ndim, const int64_t *s)
@@ -26,23 +146,23 @@ static void shape_str(char *b, size_t n, int ndim, const int64_t *s)
 
 g3d_status sd_need(const sd_ld *ld, const g3d_tensor_info **t, int ndim, const int64_t *shape, const char *name)
 {
-    const g3d_tensor_info *x = sd_find(ld, "%s", name);
+    char key[384];
+    const g3d_tensor_info *x = find_key(ld, name, key, sizeof key);
     *t = x;
-    if (!x) return G3D_ERR(G3D_ERR_MODEL, "%s: missing tensor %s%s", g3d_ckpt_path(ld->ck), ld->prefix, name);
+    if (!x) return G3D_ERR(G3D_ERR_MODEL, "%s: missing tensor %s", g3d_ckpt_path(ld->ck), key);
     int ok = x->ndim == ndim;
     for (int i = 0; ok && i < ndim; i++) ok = x->shape[i] == shape[i];
     /* a 1x1 convolution read as a Linear layer */
     if (!ok && ndim == 2 && x->ndim == 4 && x->shape[2] == 1 && x->shape[3] == 1)
         ok = x->shape[0] == shape[0] && x->shape[1] == shape[1];
     if (ok && x->dtype != G3D_DT_F32 && x->dtype != G3D_DT_F16 && x->dtype != G3D_DT_BF16)
-        return G3D_ERR(G3D_ERR_MODEL, "%s: tensor %s%s is %s (F32, F16 or BF16 expected)", g3d_ckpt_path(ld->ck),
-                       ld->prefix, name, g3d_dtype_name(x->dtype));
+        return G3D_ERR(G3D_ERR_MODEL, "%s: tensor %s is %s (F32, F16 or BF16 expected)", g3d_ckpt_path(ld->ck), key,
+                       g3d_dtype_name(x->dtype));
     if (!ok) {
         char got[96], want[96];
         shape_str(got, sizeof got, x->ndim, x->shape);
         shape_str(want, sizeof want, ndim, shape);
-        return G3D_ERR(G3D_ERR_MODEL, "%s: tensor %s%s has shape %s, expected %s", g3d_ckpt_path(ld->ck), ld->prefix,
-                       name, got, want);
+        return G3D_ERR(G3D_ERR_MODEL, "%s: tensor %s has shape %s, expected %s", g3d_ckpt_path(ld->ck), key, got, want);
     }
     return G3D_OK;
 }

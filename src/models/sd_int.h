@@ -6,10 +6,21 @@
 #include "gen3d/ckpt.h"
 #include "gen3d/nn.h"
 
+/* Where tensors are looked up. Names are always given as the original (ldm) checkpoints spell
+ * them; with `layout` set they are translated to diffusers' names first (its UNet needs the res
+ * blocks per level, its VAE the level count: diffusers lists the decoder's levels the other
+ * way round). */
+typedef enum sd_layout { SD_ORIGINAL, SD_DIFFUSERS_UNET, SD_DIFFUSERS_VAE } sd_layout;
 typedef struct sd_ld {
     const g3d_ckpt *ck;
     const char *prefix;
+    sd_layout layout;
+    int nres, levels;
 } sd_ld;
+
+/* The file's key for an original name into key[n] (the prefix included); 0 when the name has
+ * no counterpart in the layout. */
+int sd_key(const sd_ld *ld, const char *name, char *key, size_t n);
 
 /* The tensor <prefix><formatted name>, or NULL. */
 const g3d_tensor_info *sd_find(const sd_ld *ld, const char *fmt, ...);

@@ -5,6 +5,8 @@
 
 #include "gen3d/clip_text.h"
 
+#include <cjson/cJSON.h>
+
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -59,17 +61,68 @@ static g3d_status check_finite(const g3d_ckpt *ck, const char *prefix)
     return G3D_OK;
 }
 
-static g3d_status open_part(g3d_sd *m, int slot, const char *path)
+static int is_dir(const char *p)
 {
     struct stat st;
-    if (stat(path, &st) == 0 && S_ISDIR(st.st_mode))
-        return G3D_ERR(G3D_ERR_UNSUPPORTED, "%s: a folder; give the single-file checkpoint (.safetensors or .ckpt)", path);
-    return g3d_ckpt_open(path, &m->ck[slot]);
+    return p && stat(p, &st) == 0 && S_ISDIR(st.st_mode);
+}
+
+/* <dir>/<sub>/<the first of names that exists>, malloc'd, or NULL. */
+static char *first_file(const char *dir, const char *sub, const char *const *names, int n)
+{
+    struct stat st;
+    for (int i = 0; i < n; i++) {
+        size_t len = strlen(dir) + strlen(sub) + strlen(names[i]) + 3;
+        char *f = malloc(len);
+        if (!f) return NULL;
+        snprintf(f, len, "%s/%s/%s", dir, sub, names[i]);
+        if (stat(f, &st) == 0 && S_ISREG(st.st_mode)) return f;
+        free(f);
+    }
+    return NULL;
+}
+
+/* The text of <dir>/<sub>/<name> (malloc'd), or NULL when there is none. */
+static char *read_text(const char *dir, const char *sub, const char *name)
+{
+    char *f = first_file(dir, sub, &name, 1);
+    unsigned char *t = NULL;
+    size_t n;
+    if (f && g3d_read_file(f, 1 << 20, &t, &n) != G3D_OK) t = NULL;
+    free(f);
+    return (char *)t;
+}
+
+/* Opens a part: a file, or in a diffusers folder <dir>/<sub>/ its weights. */
+static g3d_status open_part(g3d_sd *m, int slot, const char *path, const char *sub)
+{
+    static const char *const unet[] = {"diffusion_pytorch_model.safetensors", "diffusion_pytorch_model.fp16.safetensors",
+                                       "diffusion_pytorch_model.bin", "diffusion_pytorch_model.fp16.bin"};
+    static const char *const text[] = {"model.safetensors", "model.fp16.safetensors", "pytorch_model.bin", "pytorch_model.fp16.bin"};
+    if (!is_dir(path)) return g3d_ckpt_open(path, &m->ck[slot]);
+    char *f = first_file(path, sub, strcmp(sub, "text_encoder") ? unet : text, 4);
+    if (!f) return G3D_ERR(G3D_ERR_IO, "%s: neither a checkpoint file nor a diffusers folder with %s/ weights", path, sub);
+    g3d_status rc = g3d_ckpt_open(f, &m->ck[slot]);
+    free(f);
+    return rc;
+}
+
+/* diffusers' scheduler/scheduler_config.json: prediction_type, or -1. */
+static int folder_prediction(const char *dir)
+{
+    char *t = read_text(dir, "scheduler", "scheduler_config.json");
+    cJSON *j = t ? cJSON_Parse(t) : NULL;
+    const char *pt = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(j, "prediction_type"));
+    int r = pt ? (!strcmp(pt, "v_prediction") ? G3D_SD_PRED_V : G3D_SD_PRED_EPS) : -1;
+    cJSON_Delete(j);
+    free(t);
+    return r;
 }
 
 static g3d_status sd_build(g3d_sd *m, const g3d_sd_paths *p)
 {
-    G3D_TRY(open_part(m, 0, p->model));
+    int folder = is_dir(p->model);
+    G3D_TRY(open_part(m, 0, p->model, "unet"));
     char *yaml = NULL;
     if (p->yaml) {
         unsigned char *y = NULL;
@@ -77,21 +130,25 @@ static g3d_status sd_build(g3d_sd *m, const g3d_sd_paths *p)
         G3D_TRY(g3d_read_file(p->yaml, 1 << 20, &y, &n));
         yaml = (char *)y;
     } else {
-        yaml = g3d_sd_yaml_beside(p->model);
+        yaml = folder ? read_text(p->model, "unet", "config.json") : g3d_sd_yaml_beside(p->model);
     }
     g3d_status rc = g3d_sd_unet_load(m->ck[0], yaml, &m->unet);
     free(yaml);
     G3D_TRY(rc);
     g3d_sd_unet_config *uc = (g3d_sd_unet_config *)g3d_sd_unet_get_config(m->unet);
-    if (p->prediction >= 0) uc->pred = (g3d_sd_pred)p->prediction;
+    int pred = p->prediction >= 0 ? p->prediction : folder ? folder_prediction(p->model) : -1;
+    if (pred >= 0) uc->pred = (g3d_sd_pred)pred;
     G3D_TRY(check_finite(m->ck[0], uc->prefix));
-    if (p->vae) G3D_TRY(open_part(m, 1, p->vae));
+    if (p->vae || folder) G3D_TRY(open_part(m, 1, p->vae ? p->vae : p->model, "vae"));
     const g3d_ckpt *vck = m->ck[1] ? m->ck[1] : m->ck[0];
     G3D_TRY(g3d_sd_vae_load(vck, &m->vae));
     G3D_TRY(check_finite(vck, g3d_sd_vae_get_config(m->vae)->prefix));
-    if (p->text_encoder) G3D_TRY(open_part(m, 2, p->text_encoder));
+    if (p->text_encoder || folder) G3D_TRY(open_part(m, 2, p->text_encoder ? p->text_encoder : p->model, "text_encoder"));
     const g3d_ckpt *tck = m->ck[2] ? m->ck[2] : m->ck[0];
-    G3D_TRY(g3d_clip_text_load_ckpt(tck, NULL, &m->text));
+    char *tcfg = !p->text_encoder && folder ? read_text(p->model, "text_encoder", "config.json") : NULL;
+    rc = g3d_clip_text_load_ckpt(tck, tcfg, &m->text);
+    free(tcfg);
+    G3D_TRY(rc);
     const g3d_clip_text_config *tc = g3d_clip_text_get_config(m->text);
     G3D_TRY(check_finite(tck, tc->prefix));
     if (tc->width != uc->context_dim)
@@ -100,7 +157,10 @@ static g3d_status sd_build(g3d_sd *m, const g3d_sd_paths *p)
     if (g3d_sd_vae_get_config(m->vae)->z_ch * (uc->in_ch == 9 ? 2 : 1) + (uc->in_ch == 9) != uc->in_ch)
         return G3D_ERR(G3D_ERR_MODEL, "%s: the VAE's %d latent channels do not fit the UNet's %d input channels",
                        g3d_ckpt_path(vck), g3d_sd_vae_get_config(m->vae)->z_ch, uc->in_ch);
-    G3D_TRY(g3d_clip_tokenizer_load(p->tokenizer, &m->tok));
+    char *tokdir = folder && !p->tokenizer ? g3d_path_join(p->model, "tokenizer") : NULL;
+    rc = g3d_clip_tokenizer_load(p->tokenizer ? p->tokenizer : is_dir(tokdir) ? p->model : NULL, &m->tok);
+    free(tokdir);
+    G3D_TRY(rc);
     g3d_clip_tokenizer_set_openclip(m->tok, tc->family == G3D_CLIP_OPENCLIP);
     return G3D_OK;
 }

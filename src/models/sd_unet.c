@@ -5,6 +5,8 @@
 
 #include "sd_int.h"
 
+#include <cjson/cJSON.h>
+
 #include <ctype.h>
 #include <math.h>
 #include <stdio.h>
@@ -67,13 +69,50 @@ static int yaml_int(const char *y, const char *key, int *v)
 
 static const char *const UNET_PREFIXES[] = {"model.diffusion_model.", ""};
 
+static sd_ld unet_ld(const g3d_ckpt *ck, const g3d_sd_unet_config *c)
+{
+    return (sd_ld){ck, c->prefix, c->diffusers ? SD_DIFFUSERS_UNET : SD_ORIGINAL, c->nres[0], c->levels};
+}
+
+/* diffusers' unet/config.json: attention_head_dim (or num_attention_heads) is the head count,
+ * one for every level or a list; in_channels and cross_attention_dim are checked. */
+static g3d_status apply_json(const g3d_ckpt *ck, const char *text, g3d_sd_unet_config *c)
+{
+    cJSON *j = cJSON_Parse(text);
+    if (!j) return G3D_ERR(G3D_ERR_FORMAT, "%s: the UNet's config.json is not JSON", g3d_ckpt_path(ck));
+    const cJSON *h = cJSON_GetObjectItemCaseSensitive(j, "num_attention_heads");
+    if (!h || cJSON_IsNull(h)) h = cJSON_GetObjectItemCaseSensitive(j, "attention_head_dim");
+    const cJSON *in = cJSON_GetObjectItemCaseSensitive(j, "in_channels"), *cd = cJSON_GetObjectItemCaseSensitive(j, "cross_attention_dim");
+    g3d_status rc = G3D_OK;
+    if (cJSON_IsNumber(h) && h->valueint > 0) c->heads = h->valueint, c->head_dim = 0;
+    if (cJSON_IsArray(h) && cJSON_IsNumber(cJSON_GetArrayItem(h, 0)) && cJSON_GetArrayItem(h, 0)->valueint > 0) {
+        /* heads per level; the published lists keep 64 channels per head */
+        c->head_dim = c->mult[0] * c->model_ch / cJSON_GetArrayItem(h, 0)->valueint;
+        c->heads = 0;
+    }
+    if (cJSON_IsNumber(in) && in->valueint != c->in_ch)
+        rc = G3D_ERR(G3D_ERR_MODEL, "%s: config.json says %d input channels, the tensors have %d", g3d_ckpt_path(ck), in->valueint, c->in_ch);
+    if (cJSON_IsNumber(cd) && cd->valueint != c->context_dim)
+        rc = G3D_ERR(G3D_ERR_MODEL, "%s: config.json says context %d, the tensors have %d", g3d_ckpt_path(ck), cd->valueint, c->context_dim);
+    cJSON_Delete(j);
+    return rc;
+}
+
 g3d_status g3d_sd_unet_probe(const g3d_ckpt *ck, const char *yaml, g3d_sd_unet_config *c)
 {
     memset(c, 0, sizeof *c);
-    sd_ld ld = {ck, NULL};
+    sd_ld ld = {ck, NULL, SD_ORIGINAL, 0, 0};
     for (size_t i = 0; i < sizeof UNET_PREFIXES / sizeof *UNET_PREFIXES && !ld.prefix; i++) {
-        sd_ld t = {ck, UNET_PREFIXES[i]};
+        sd_ld t = {ck, UNET_PREFIXES[i], SD_ORIGINAL, 0, 0};
         if (sd_find(&t, "input_blocks.0.0.weight") && sd_find(&t, "time_embed.0.weight")) ld.prefix = t.prefix;
+    }
+    if (!ld.prefix && g3d_ckpt_find(ck, "conv_in.weight") && g3d_ckpt_find(ck, "time_embedding.linear_1.weight")) {
+        char k[64];
+        ld.prefix = "";
+        ld.layout = SD_DIFFUSERS_UNET;
+        c->diffusers = 1;
+        do snprintf(k, sizeof k, "down_blocks.0.resnets.%d.conv1.weight", ld.nres);
+        while (g3d_ckpt_find(ck, k) && ++ld.nres < 64);
     }
     if (!ld.prefix)
         return G3D_ERR(G3D_ERR_MODEL, "%s: not a Stable Diffusion UNet (missing tensor model.diffusion_model.input_blocks.0.0.weight)",
@@ -125,6 +164,9 @@ g3d_status g3d_sd_unet_probe(const g3d_ckpt *ck, const char *yaml, g3d_sd_unet_c
     if (c->family == 2) c->head_dim = 64;
     else c->heads = 8;
     c->pred = G3D_SD_PRED_EPS;
+    const char *y = yaml;
+    while (y && isspace((unsigned char)*y)) y++;
+    if (y && *y == '{') return apply_json(ck, y, c);
     if (yaml) {
         int v;
         if (yaml_int(yaml, "num_heads", &v) >= 0 && v > 0) c->heads = v, c->head_dim = 0;
@@ -173,10 +215,11 @@ const char *g3d_sd_unet_describe(const g3d_sd_unet_config *c, char *buf, size_t 
     char heads[32];
     if (c->heads) snprintf(heads, sizeof heads, "%d heads", c->heads);
     else snprintf(heads, sizeof heads, "heads of %d", c->head_dim);
-    snprintf(buf, n, "SD %d.x UNet (%d input channels%s, model channels %d, multipliers %s, res blocks %s, attention at levels %s, "
+    snprintf(buf, n, "SD %d.x UNet (%s%d input channels%s, model channels %d, multipliers %s, res blocks %s, attention at levels %s, "
              "transformer depth %d, context %d, %s, %s projections, %s prediction)",
-             c->family, c->in_ch, c->in_ch == 9 ? ": inpainting" : "", c->model_ch, mult, nres, attn[0] ? attn : "none", c->depth,
-             c->context_dim, heads, c->linear_proj ? "Linear" : "1x1-conv", c->pred == G3D_SD_PRED_V ? "v" : "epsilon");
+             c->family, c->diffusers ? "diffusers layout, " : "", c->in_ch, c->in_ch == 9 ? ": inpainting" : "", c->model_ch, mult, nres,
+             attn[0] ? attn : "none", c->depth, c->context_dim, heads, c->linear_proj ? "Linear" : "1x1-conv",
+             c->pred == G3D_SD_PRED_V ? "v" : "epsilon");
     return buf;
 }
 
@@ -293,7 +336,7 @@ static g3d_status res_st(const sd_ld *ld, const g3d_sd_unet *m, sd_block *b, int
 static g3d_status unet_build(g3d_sd_unet *m, const g3d_ckpt *ck)
 {
     const g3d_sd_unet_config *c = &m->cfg;
-    sd_ld ld = {ck, c->prefix};
+    sd_ld ld = unet_ld(ck, c);
     int C = c->model_ch;
     char n[256];
     m->temb_dim = 4 * C;

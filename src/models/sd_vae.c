@@ -39,9 +39,17 @@ static const char *const VAE_PREFIXES[] = {"first_stage_model.", ""};
 g3d_status g3d_sd_vae_probe(const g3d_ckpt *ck, g3d_sd_vae_config *c)
 {
     memset(c, 0, sizeof *c);
-    sd_ld ld = {ck, NULL};
+    sd_ld ld = {ck, NULL, SD_ORIGINAL, 0, 0};
+    if (g3d_ckpt_find(ck, "encoder.down_blocks.0.resnets.0.conv1.weight")) {
+        char k[64];
+        ld.prefix = "";
+        ld.layout = SD_DIFFUSERS_VAE;
+        c->diffusers = 1;
+        do snprintf(k, sizeof k, "encoder.down_blocks.%d.resnets.0.conv1.weight", ld.levels);
+        while (g3d_ckpt_find(ck, k) && ++ld.levels < G3D_SD_MAX_LEVELS);
+    }
     for (size_t i = 0; i < sizeof VAE_PREFIXES / sizeof *VAE_PREFIXES && !ld.prefix; i++) {
-        sd_ld t = {ck, VAE_PREFIXES[i]};
+        sd_ld t = {ck, VAE_PREFIXES[i], SD_ORIGINAL, 0, 0};
         if (sd_find(&t, "encoder.conv_in.weight") && sd_find(&t, "decoder.conv_in.weight")) ld.prefix = t.prefix;
     }
     if (!ld.prefix)
@@ -145,7 +153,7 @@ static g3d_status level_load(const sd_ld *ld, vae_level *L, const char *side, in
 static g3d_status vae_build(g3d_sd_vae *m, const g3d_ckpt *ck)
 {
     const g3d_sd_vae_config *c = &m->cfg;
-    sd_ld ld = {ck, c->prefix};
+    sd_ld ld = {ck, c->prefix, c->diffusers ? SD_DIFFUSERS_VAE : SD_ORIGINAL, c->nres, c->levels};
     char n[300];
     int z = c->z_ch, top = c->ch * c->mult[c->levels - 1];
     m->down = calloc((size_t)c->levels, sizeof *m->down);
