@@ -355,8 +355,8 @@ static g3d_status unet_build(g3d_sd_unet *m, const g3d_ckpt *ck)
     for (int l = 0; l < c->levels; l++) {
         for (int r = 0; r < c->nres[l]; r++, i++) {
             snprintf(n, sizeof n, "input_blocks.%d", i);
+            m->nin = i + 1;   /* freed with the model even when it fails half-way */
             G3D_TRY(res_st(&ld, m, &m->in[i], ch, c->mult[l] * C, c->attn[l], n));
-            m->nin = i + 1;
             ch = c->mult[l] * C;
             chans[nch++] = ch;
         }
@@ -364,8 +364,9 @@ static g3d_status unet_build(g3d_sd_unet *m, const g3d_ckpt *ck)
             snprintf(n, sizeof n, "input_blocks.%d.0.op", i);
             m->in[i].has_down = 1;
             m->in[i].cout = ch;
+            m->nin = i + 1;
             G3D_TRY(sd_conv_load(&ld, &m->in[i].resample, ch, ch, 3, 2, n));
-            m->nin = ++i;
+            i++;
             chans[nch++] = ch;
         }
     }
@@ -382,8 +383,8 @@ static g3d_status unet_build(g3d_sd_unet *m, const g3d_ckpt *ck)
         for (int r = 0; r <= c->nres[l]; r++, i++) {
             int ich = chans[--nch];
             snprintf(n, sizeof n, "output_blocks.%d", i);
-            G3D_TRY(res_st(&ld, m, &m->out[i], ch + ich, c->mult[l] * C, c->attn[l], n));
             m->nout = i + 1;
+            G3D_TRY(res_st(&ld, m, &m->out[i], ch + ich, c->mult[l] * C, c->attn[l], n));
             ch = c->mult[l] * C;
             if (l && r == c->nres[l]) {
                 snprintf(n, sizeof n, "output_blocks.%d.%d.conv", i, c->attn[l] ? 2 : 1);
