@@ -9,17 +9,6 @@
 static g3d_ckpt *g_act;
 static g3d_sd_unet *g_unet;
 
-static float *golden(const char *name, size_t *n)
-{
-    const g3d_tensor_info *t = g3d_ckpt_find(g_act, name);
-    float *x = NULL;
-    CHECK_MSG(t != NULL, "%s missing", name);
-    if (!t) return NULL;
-    CHECK_OK(g3d_ckpt_read_alloc(g_act, name, 0, NULL, &x));
-    if (n) *n = (size_t)t->numel;
-    return x;
-}
-
 /* Classifier-free guidance with two passes of the UNet. */
 typedef struct guided {
     const float *cond, *uncond;
@@ -71,9 +60,9 @@ static void check_run(const char *run, g3d_sd_sampler_kind kind, int nsteps, int
 {
     char name[64];
     size_t n = 4 * 8 * 12, nz = 0;
-    float *x = golden("noise", NULL), *cond = golden("cond", NULL), *uncond = golden("uncond", NULL);
+    float *x = golden_floats(g_act, "noise", NULL), *cond = golden_floats(g_act, "cond", NULL), *uncond = golden_floats(g_act, "uncond", NULL);
     snprintf(name, sizeof name, "%s.noise", run);
-    float *z = g3d_ckpt_find(g_act, name) ? golden(name, &nz) : NULL;
+    float *z = g3d_ckpt_find(g_act, name) ? golden_floats(g_act, name, &nz) : NULL;
     printf("  %s\n", run);
     /* the schedule */
     if (kind == G3D_SD_DDIM) {

@@ -25,28 +25,17 @@ static void on_trace(void *ctx, const char *name, const float *x, int c, int h, 
     t->compared++;
 }
 
-static float *golden(const char *name, size_t *n)
-{
-    const g3d_tensor_info *t = g3d_ckpt_find(g_act, name);
-    float *x = NULL;
-    CHECK_MSG(t != NULL, "%s missing", name);
-    if (!t) return NULL;
-    CHECK_OK(g3d_ckpt_read_alloc(g_act, name, 0, NULL, &x));
-    if (n) *n = (size_t)t->numel;
-    return x;
-}
-
 static void check_unet(g3d_sd_unet *m, const char *key, int expect_blocks)
 {
     const g3d_sd_unet_config *c = g3d_sd_unet_get_config(m);
     char name[64];
     size_t nctx = 0;
     snprintf(name, sizeof name, "%s.x", key);
-    float *x = golden(name, NULL);
+    float *x = golden_floats(g_act, name, NULL);
     snprintf(name, sizeof name, "%s.t", key);
-    float *t = golden(name, NULL);
+    float *t = golden_floats(g_act, name, NULL);
     snprintf(name, sizeof name, "%s.context", key);
-    float *ctx = golden(name, &nctx);
+    float *ctx = golden_floats(g_act, name, &nctx);
     float *eps = malloc(sizeof(float) * 4 * 8 * 12);
     trace_ctx tc = {key, 0};
     if (x && t && ctx && eps) {
@@ -119,7 +108,7 @@ TEST(vae)
     const g3d_sd_vae_config *c = g3d_sd_vae_get_config(m);
     CHECK(c->ch == 32 && c->levels == 2 && c->mult[1] == 2 && c->nres == 1 && c->z_ch == 4 && c->factor == 2 &&
           !strcmp(c->prefix, "first_stage_model."));
-    float *img = golden("vae.image", NULL), *z = golden("vae.z", NULL);
+    float *img = golden_floats(g_act, "vae.image", NULL), *z = golden_floats(g_act, "vae.z", NULL);
     float *mom = malloc(sizeof(float) * 8 * 8 * 12), *rgb = malloc(sizeof(float) * 3 * 16 * 24);
     trace_ctx tc = {"vae", 0};
     if (img && z && mom && rgb) {

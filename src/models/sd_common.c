@@ -6,14 +6,11 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* A res block's leaf in diffusers' spelling: UNet (in_layers.0 ...) or VAE (nin_shortcut). */
-static const char *res_leaf(const char *rest, char *buf, size_t n)
+/* rest with its first component renamed by the table (from -> to), into buf; rest itself when
+ * no entry matches. */
+static const char *rename_leaf(const char *rest, const char *const (*map)[2], size_t n_map, char *buf, size_t n)
 {
-    static const char *const map[][2] = {{"in_layers.0.", "norm1."},      {"in_layers.2.", "conv1."},
-                                         {"emb_layers.1.", "time_emb_proj."}, {"out_layers.0.", "norm2."},
-                                         {"out_layers.3.", "conv2."},     {"skip_connection.", "conv_shortcut."},
-                                         {"nin_shortcut.", "conv_shortcut."}};
-    for (size_t i = 0; i < sizeof map / sizeof *map; i++) {
+    for (size_t i = 0; i < n_map; i++) {
         size_t k = strlen(map[i][0]);
         if (!strncmp(rest, map[i][0], k)) {
             snprintf(buf, n, "%s%s", map[i][1], rest + k);
@@ -23,19 +20,23 @@ static const char *res_leaf(const char *rest, char *buf, size_t n)
     return rest;
 }
 
-/* The VAE's AttnBlock leaves (norm, q, k, v, proj_out) in diffusers' current spelling. */
+/* A res block's leaves in diffusers' spelling (the UNet's in_layers.0 ..., the VAE's nin_shortcut). */
+static const char *const RES_LEAVES[][2] = {{"in_layers.0.", "norm1."},          {"in_layers.2.", "conv1."},
+                                            {"emb_layers.1.", "time_emb_proj."}, {"out_layers.0.", "norm2."},
+                                            {"out_layers.3.", "conv2."},         {"skip_connection.", "conv_shortcut."},
+                                            {"nin_shortcut.", "conv_shortcut."}};
+/* The VAE's AttnBlock leaves in diffusers' current spelling. */
+static const char *const ATTN_LEAVES[][2] = {{"norm.", "group_norm."}, {"q.", "to_q."}, {"k.", "to_k."}, {"v.", "to_v."},
+                                             {"proj_out.", "to_out.0."}};
+
+static const char *res_leaf(const char *rest, char *buf, size_t n)
+{
+    return rename_leaf(rest, RES_LEAVES, sizeof RES_LEAVES / sizeof *RES_LEAVES, buf, n);
+}
+
 static const char *attn_leaf(const char *rest, char *buf, size_t n)
 {
-    static const char *const map[][2] = {{"norm.", "group_norm."}, {"q.", "to_q."}, {"k.", "to_k."}, {"v.", "to_v."},
-                                         {"proj_out.", "to_out.0."}};
-    for (size_t i = 0; i < sizeof map / sizeof *map; i++) {
-        size_t k = strlen(map[i][0]);
-        if (!strncmp(rest, map[i][0], k)) {
-            snprintf(buf, n, "%s%s", map[i][1], rest + k);
-            return buf;
-        }
-    }
-    return rest;
+    return rename_leaf(rest, ATTN_LEAVES, sizeof ATTN_LEAVES / sizeof *ATTN_LEAVES, buf, n);
 }
 
 static int unet_key(const sd_ld *ld, const char *name, char *out, size_t n)
