@@ -1,6 +1,6 @@
 /* The samplers against their reference code (tests/fixtures/make_sdsample_golden.py): ldm's
  * DDIM (epsilon, and v with eta 0.5) and k-diffusion's Euler, Euler ancestral and DPM++ 2M on
- * the discrete and Karras sigmas, each a whole denoising trajectory of the tiny SD 1.x UNet from
+ * the discrete and Karras sigmas, diffusers' PNDM, each a whole denoising trajectory of the tiny SD 1.x UNet from
  * the recorded initial noise with classifier-free guidance; their schedules; refusals. */
 #include "golden.h"
 
@@ -65,9 +65,9 @@ static void check_run(const char *run, g3d_sd_sampler_kind kind, int nsteps, int
     float *z = g3d_ckpt_find(g_act, name) ? golden_floats(g_act, name, &nz) : NULL;
     printf("  %s\n", run);
     /* the schedule */
-    if (kind == G3D_SD_DDIM) {
+    if (kind == G3D_SD_DDIM || kind == G3D_SD_PNDM) {
         int ts[G3D_SD_TRAIN_STEPS];
-        int k = g3d_sd_ddim_timesteps(nsteps, ts);
+        int k = kind == G3D_SD_DDIM ? g3d_sd_ddim_timesteps(nsteps, ts) : g3d_sd_pndm_timesteps(nsteps, ts);
         snprintf(name, sizeof name, "%s.timesteps", run);
         const g3d_tensor_info *t = g3d_ckpt_find(g_act, name);
         CHECK(t && t->numel == k && !memcmp(t->data, ts, sizeof(int) * (size_t)k));
@@ -107,6 +107,12 @@ TEST(k_diffusion)
     check_run("dpmpp_2m_karras_v", G3D_SD_DPMPP_2M, 9, 1, G3D_SD_PRED_V, 0, 4.0f);
 }
 
+TEST(pndm)
+{
+    check_run("pndm_eps", G3D_SD_PNDM, 10, 0, G3D_SD_PRED_EPS, 0, 7.5f);
+    check_run("pndm_v", G3D_SD_PNDM, 6, 0, G3D_SD_PRED_V, 0, 3.0f);
+}
+
 TEST(names_and_refusals)
 {
     CHECK(g3d_sd_sampler_parse("euler_a") == G3D_SD_EULER_A && g3d_sd_sampler_parse("dpm++2m") == G3D_SD_DPMPP_2M &&
@@ -130,6 +136,7 @@ int main(void)
     if (g_act && g_unet) {
         RUN(ddim);
         RUN(k_diffusion);
+        RUN(pndm);
         RUN(names_and_refusals);
     }
     g3d_sd_unet_free(g_unet);

@@ -139,10 +139,14 @@ typedef enum g3d_sd_sampler_kind {
     G3D_SD_EULER,    /* k-diffusion sample_euler */
     G3D_SD_EULER_A,  /* k-diffusion sample_euler_ancestral (eta 1) */
     G3D_SD_DPMPP_2M, /* k-diffusion sample_dpmpp_2m */
+    G3D_SD_PNDM,     /* diffusers' PNDMScheduler as SD 1.5 configures it: PLMS steps only (its warm-up
+                        evaluates the second timestep twice: N + 1 model calls), "leading" timesteps
+                        1000/N apart from 1, diffusers' float32 schedule; the default of SD 1.5's
+                        diffusers pipeline */
     G3D_SD_SAMPLER_COUNT
 } g3d_sd_sampler_kind;
 
-/* "ddim", "euler", "euler_a", "dpmpp_2m" (also "dpm++2m"); -1 if unknown. */
+/* "ddim", "euler", "euler_a", "dpmpp_2m" (also "dpm++2m"), "pndm"; -1 if unknown. */
 int g3d_sd_sampler_parse(const char *name);
 const char *g3d_sd_sampler_name(g3d_sd_sampler_kind k);
 
@@ -160,6 +164,9 @@ void g3d_sd_alphas_cumprod(float *ac);
  * spacing range(0, 1000, 1000 // N) + 1, which gives more than N steps when N does not divide
  * 1000 (7 -> 8). t holds 1000 entries; returns the count. */
 int g3d_sd_ddim_timesteps(int steps, int *t);
+/* PNDM's timesteps for N steps in calling order (901 801 801 701 ... 1 for 10); t holds N + 1
+ * entries; returns the count (N + 1, or 1 for one step). */
+int g3d_sd_pndm_timesteps(int steps, int *t);
 /* k-diffusion's sigmas for N steps, then a final 0: sigmas[N + 1]. Discrete: CompVisDenoiser's
  * get_sigmas (log-sigma interpolation of 1000 training levels from t = 999 down to 0); Karras:
  * get_sigmas_karras between the smallest and the largest training sigma. */

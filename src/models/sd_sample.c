@@ -7,7 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-static const char *const NAMES[G3D_SD_SAMPLER_COUNT] = {"ddim", "euler", "euler_a", "dpmpp_2m"};
+static const char *const NAMES[G3D_SD_SAMPLER_COUNT] = {"ddim", "euler", "euler_a", "dpmpp_2m", "pndm"};
 
 int g3d_sd_sampler_parse(const char *name)
 {
@@ -209,6 +209,80 @@ static g3d_status kdiff(const run *r, float *x)
     return rc;
 }
 
+int g3d_sd_pndm_timesteps(int steps, int *t)
+{
+    int r = G3D_SD_TRAIN_STEPS / steps;
+    /* "leading" spacing i r + 1, the second-to-last repeated (there is none for one step), in reverse */
+    t[0] = (steps - 1) * r + 1;
+    for (int i = 1; i <= steps; i++) t[i] = (steps - (i > 1 ? i : 2)) * r + 1;
+    return steps == 1 ? 1 : steps + 1;
+}
+
+/* diffusers' schedule: betas = linspace(sqrt 0.00085, sqrt 0.012)^2 and their cumulative
+ * product, all in float32 as torch computes them there. */
+static void pndm_alphas(float *ac)
+{
+    const int n = G3D_SD_TRAIN_STEPS;
+    float a = sqrtf(0.00085f), b = sqrtf(0.012f), step = (b - a) / (float)(n - 1), prod = 1.0f;
+    for (int i = 0; i < n; i++) {
+        float r = i < n / 2 ? a + step * (float)i : b - step * (float)(n - 1 - i);
+        prod *= 1.0f - r * r;
+        ac[i] = prod;
+    }
+}
+
+static g3d_status pndm(const run *r, float *x)
+{
+    int N = r->s->steps, ratio = G3D_SD_TRAIN_STEPS / N, v = r->s->pred == G3D_SD_PRED_V, calls = 0;
+    float ac[G3D_SD_TRAIN_STEPS];
+    int *ts = malloc(sizeof(int) * (size_t)(N + 1));
+    /* the last four model outputs (a ring) and the sample before the first step */
+    float *ets = malloc(sizeof(float) * 4 * r->n), *first = malloc(sizeof(float) * r->n);
+    g3d_status rc = ts && ets && first ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory in the sampler");
+    if (rc == G3D_OK) {
+        pndm_alphas(ac);
+        calls = g3d_sd_pndm_timesteps(N, ts);
+    }
+    int nets = 0;
+    for (int k = 0; rc == G3D_OK && k < calls; k++) {
+        int t = ts[k], prev = t - ratio;
+        rc = r->model(r->mctx, x, (float)t, r->out);
+        if (rc != G3D_OK) break;
+        const float *e[4];
+        float *sample = x;
+        if (k != 1) {
+            memcpy(ets + (size_t)(nets % 4) * r->n, r->out, sizeof(float) * r->n);
+            nets++;
+        } else {
+            /* the warm-up's second call: a Heun-like average, from the first sample again */
+            prev = t;
+            t += ratio;
+            sample = first;
+        }
+        for (int i = 0; i < 4 && i < nets; i++) e[i] = ets + (size_t)((nets - 1 - i) % 4) * r->n;
+        if (k == 0) memcpy(first, x, sizeof(float) * r->n);
+        double at = ac[t], ap = prev >= 0 ? ac[prev] : ac[0], bt = 1 - at, bp = 1 - ap;
+        double sc = sqrt(ap / at), den = at * sqrt(bp) + sqrt(at * bt * ap);
+        for (size_t j = 0; j < r->n; j++) {
+            double m;
+            if (k == 1) m = (r->out[j] + e[0][j]) / 2.0;
+            else if (nets == 1) m = e[0][j];
+            else if (nets == 2) m = (3.0 * e[0][j] - e[1][j]) / 2.0;
+            else if (nets == 3) m = (23.0 * e[0][j] - 16.0 * e[1][j] + 5.0 * e[2][j]) / 12.0;
+            else m = (55.0 * e[0][j] - 59.0 * e[1][j] + 37.0 * e[2][j] - 9.0 * e[3][j]) / 24.0;
+            double s = sample[j];
+            if (v) m = sqrt(at) * m + sqrt(bt) * s;
+            x[j] = (float)(sc * s - (ap - at) * m / den);
+        }
+        float na = k + 1 < calls ? sqrtf(ac[ts[k + 1]]) : 1.0f, nb = k + 1 < calls ? sqrtf(1.0f - ac[ts[k + 1]]) : 0.0f;
+        rc = after_step(r, k, calls, x, na, nb);
+    }
+    free(ts);
+    free(ets);
+    free(first);
+    return rc;
+}
+
 g3d_status g3d_sd_sample(const g3d_sd_sampler *s, float *x, size_t n, g3d_sd_model_fn model, void *model_ctx,
                          g3d_sd_noise_fn noise, void *noise_ctx, g3d_sd_step_fn step, void *step_ctx)
 {
@@ -219,7 +293,7 @@ g3d_status g3d_sd_sample(const g3d_sd_sampler *s, float *x, size_t n, g3d_sd_mod
     run r = {s, n, model, model_ctx, noise, noise_ctx, step, step_ctx, malloc(sizeof(float) * n), malloc(sizeof(float) * n),
              malloc(sizeof(float) * n)};
     g3d_status rc = r.out && r.tmp && r.z ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory in the sampler");
-    if (rc == G3D_OK) rc = s->kind == G3D_SD_DDIM ? ddim(&r, x) : kdiff(&r, x);
+    if (rc == G3D_OK) rc = s->kind == G3D_SD_DDIM ? ddim(&r, x) : s->kind == G3D_SD_PNDM ? pndm(&r, x) : kdiff(&r, x);
     free(r.out);
     free(r.tmp);
     free(r.z);
