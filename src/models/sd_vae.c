@@ -253,35 +253,42 @@ static g3d_status attn_forward(const vae_attn *a, vfwd *f, float *x, int hw)
     return G3D_OK;
 }
 
-/* *x [cin, h, w] -> a new map [r->cout, h, w] from the arena. */
-static g3d_status res_step(const sd_res *r, vfwd *f, float **x, int h, int w)
+/* The current map lives alone at the arena offset `base`: a step computes its successor above it,
+ * then moves it down to base, so the decoder holds one full-resolution map at a time. */
+static float *settle(vfwd *f, size_t base, const float *y, size_t n)
+{
+    g3d_nn_arena_reset(f->ar, base);
+    float *x = g3d_nn_arena_floats(f->ar, n);   /* fits where the old map was, or further up */
+    if (x && x != y) memmove(x, y, sizeof(float) * n);
+    return x;
+}
+
+/* *x [cin, h, w] at base -> [r->cout, h, w] at base. */
+static g3d_status res_step(const sd_res *r, vfwd *f, float **x, size_t base, int h, int w)
 {
     size_t hw = (size_t)h * w;
     float *y = g3d_nn_arena_floats(f->ar, (size_t)r->cout * hw);
-    size_t mark = g3d_nn_arena_mark(f->ar);
     int big = r->cin > r->cout ? r->cin : r->cout;
     float *tmp = g3d_nn_arena_floats(f->ar, (size_t)big * hw + r->cout);
     if (!y || !tmp) return NOMEM;
     G3D_TRY(sd_res_forward(r, *x, h, w, NULL, y, tmp));
-    g3d_nn_arena_reset(f->ar, mark);
-    *x = y;
-    return G3D_OK;
+    return (*x = settle(f, base, y, (size_t)r->cout * hw)) ? G3D_OK : NOMEM;
 }
 
-static g3d_status level_forward(const vae_level *L, int nres, vfwd *f, float **x, int h, int w)
+static g3d_status level_forward(const vae_level *L, int nres, vfwd *f, float **x, size_t base, int h, int w)
 {
     for (int b = 0; b < nres; b++) {
-        G3D_TRY(res_step(&L->res[b], f, x, h, w));
+        G3D_TRY(res_step(&L->res[b], f, x, base, h, w));
         if (L->attn) G3D_TRY(attn_forward(&L->attn[b], f, *x, h * w));
     }
     return G3D_OK;
 }
 
-static g3d_status mid_forward(const sd_res *mid, const vae_attn *a, vfwd *f, float **x, int h, int w)
+static g3d_status mid_forward(const sd_res *mid, const vae_attn *a, vfwd *f, float **x, size_t base, int h, int w)
 {
-    G3D_TRY(res_step(&mid[0], f, x, h, w));
+    G3D_TRY(res_step(&mid[0], f, x, base, h, w));
     G3D_TRY(attn_forward(a, f, *x, h * w));
-    return res_step(&mid[1], f, x, h, w);
+    return res_step(&mid[1], f, x, base, h, w);
 }
 
 /* GroupNorm + SiLU, then conv (3x3) into out. */
@@ -298,11 +305,12 @@ static g3d_status encode_run(const g3d_sd_vae *m, vfwd *f, const float *rgb, int
 {
     const g3d_sd_vae_config *c = &m->cfg;
     int h = H, w = W, ch = c->ch;
+    size_t base = g3d_nn_arena_mark(f->ar);
     float *x = g3d_nn_arena_floats(f->ar, (size_t)ch * h * w);
     if (!x) return NOMEM;
     G3D_TRY(g3d_nn_conv_forward(&m->enc_in, rgb, h, w, x, NULL));
     for (int l = 0; l < c->levels; l++) {
-        G3D_TRY(level_forward(&m->down[l], c->nres, f, &x, h, w));
+        G3D_TRY(level_forward(&m->down[l], c->nres, f, &x, base, h, w));
         ch = c->ch * c->mult[l];
         if (m->down[l].has_resample) {
             float *p = g3d_nn_arena_floats(f->ar, (size_t)ch * (h + 1) * (w + 1));
@@ -310,10 +318,11 @@ static g3d_status encode_run(const g3d_sd_vae *m, vfwd *f, const float *rgb, int
             if (!p || !y) return NOMEM;
             G3D_TRY(g3d_nn_pad2d(x, ch, h, w, 0, 1, 0, 1, G3D_PAD_ZEROS, p));
             G3D_TRY(g3d_nn_conv_forward(&m->down[l].resample, p, h + 1, w + 1, y, NULL));
-            x = y, h /= 2, w /= 2;
+            h /= 2, w /= 2;
+            if (!(x = settle(f, base, y, (size_t)ch * h * w))) return NOMEM;
         }
     }
-    G3D_TRY(mid_forward(m->enc_mid, &m->enc_attn, f, &x, h, w));
+    G3D_TRY(mid_forward(m->enc_mid, &m->enc_attn, f, &x, base, h, w));
     vemit(f, "enc_mid", x, ch, h, w);
     float *e = g3d_nn_arena_floats(f->ar, 2 * (size_t)c->z_ch * h * w);
     if (!e) return NOMEM;
@@ -327,15 +336,17 @@ static g3d_status decode_run(const g3d_sd_vae *m, vfwd *f, const float *z, int h
 {
     const g3d_sd_vae_config *c = &m->cfg;
     int ch = c->ch * c->mult[c->levels - 1];
+    size_t base = g3d_nn_arena_mark(f->ar);
     float *q = g3d_nn_arena_floats(f->ar, (size_t)c->z_ch * h * w), *x = g3d_nn_arena_floats(f->ar, (size_t)ch * h * w);
     if (!q || !x) return NOMEM;
     G3D_TRY(g3d_nn_conv_forward(&m->post_quant, z, h, w, q, NULL));
     G3D_TRY(g3d_nn_conv_forward(&m->dec_in, q, h, w, x, NULL));
+    if (!(x = settle(f, base, x, (size_t)ch * h * w))) return NOMEM;
     vemit(f, "dec_conv_in", x, ch, h, w);
-    G3D_TRY(mid_forward(m->dec_mid, &m->dec_attn, f, &x, h, w));
+    G3D_TRY(mid_forward(m->dec_mid, &m->dec_attn, f, &x, base, h, w));
     vemit(f, "dec_mid", x, ch, h, w);
     for (int l = c->levels - 1; l >= 0; l--) {
-        G3D_TRY(level_forward(&m->up[l], c->nres + 1, f, &x, h, w));
+        G3D_TRY(level_forward(&m->up[l], c->nres + 1, f, &x, base, h, w));
         ch = c->ch * c->mult[l];
         if (m->up[l].has_resample) {
             float *u = g3d_nn_arena_floats(f->ar, (size_t)ch * 4 * h * w), *y = g3d_nn_arena_floats(f->ar, (size_t)ch * 4 * h * w);
@@ -343,7 +354,7 @@ static g3d_status decode_run(const g3d_sd_vae *m, vfwd *f, const float *z, int h
             g3d_nn_upsample2x(x, ch, h, w, u);
             h *= 2, w *= 2;
             G3D_TRY(g3d_nn_conv_forward(&m->up[l].resample, u, h, w, y, NULL));
-            x = y;
+            if (!(x = settle(f, base, y, (size_t)ch * h * w))) return NOMEM;
         }
         char n[24];
         snprintf(n, sizeof n, "dec_up%d", l);
