@@ -254,7 +254,8 @@ static g3d_status attn_forward(const vae_attn *a, vfwd *f, float *x, int hw)
 }
 
 /* The current map lives alone at the arena offset `base`: a step computes its successor above it,
- * then moves it down to base, so the decoder holds one full-resolution map at a time. */
+ * then moves it down to base, so the decoder holds one full-resolution map at a time. base is
+ * never 0 (see run_base): resetting an arena to 0 merges its chunks, freeing the successor. */
 static float *settle(vfwd *f, size_t base, const float *y, size_t n)
 {
     g3d_nn_arena_reset(f->ar, base);
@@ -301,11 +302,18 @@ static g3d_status norm_conv(vfwd *f, const float *x, int c, int h, int w, const 
     return g3d_nn_conv_forward(cv, t, h, w, out, NULL);
 }
 
+/* A non-zero base offset for settle. */
+static size_t run_base(vfwd *f)
+{
+    return g3d_nn_arena_floats(f->ar, 1) ? g3d_nn_arena_mark(f->ar) : 0;
+}
+
 static g3d_status encode_run(const g3d_sd_vae *m, vfwd *f, const float *rgb, int H, int W, float *moments)
 {
     const g3d_sd_vae_config *c = &m->cfg;
     int h = H, w = W, ch = c->ch;
-    size_t base = g3d_nn_arena_mark(f->ar);
+    size_t base = run_base(f);
+    if (!base) return NOMEM;
     float *x = g3d_nn_arena_floats(f->ar, (size_t)ch * h * w);
     if (!x) return NOMEM;
     G3D_TRY(g3d_nn_conv_forward(&m->enc_in, rgb, h, w, x, NULL));
@@ -336,7 +344,8 @@ static g3d_status decode_run(const g3d_sd_vae *m, vfwd *f, const float *z, int h
 {
     const g3d_sd_vae_config *c = &m->cfg;
     int ch = c->ch * c->mult[c->levels - 1];
-    size_t base = g3d_nn_arena_mark(f->ar);
+    size_t base = run_base(f);
+    if (!base) return NOMEM;
     float *q = g3d_nn_arena_floats(f->ar, (size_t)c->z_ch * h * w), *x = g3d_nn_arena_floats(f->ar, (size_t)ch * h * w);
     if (!q || !x) return NOMEM;
     G3D_TRY(g3d_nn_conv_forward(&m->post_quant, z, h, w, q, NULL));
