@@ -175,8 +175,8 @@ int g3d_sd_cli_inpaint(int argc, char **argv)
              "Fills the white pixels of a mask with content for a prompt. An inpainting model (9 input\n"
              "channels) sees the mask and the masked picture; a text-to-image model inpaints by latent\n"
              "blending (said on stderr). The known pixels are pasted back, with an 8-pixel feathered seam\n"
-             "inside the mask. The picture's sides must be multiples of 64 (8 for the latent's 1/8 times\n"
-             "the UNet's three halvings).\n%s", DESC_COMMON);
+             "inside the mask. The picture's sides must be multiples of 64 for SD (the VAE's 8 times the\n"
+             "UNet's three halvings).\n%s", DESC_COMMON);
     const char *pos[1];
     int npos, prc = g3d_cli_parse(argc, argv, opts, G3D_COUNTOF(opts),
                                   "gen3d inpaint -m MODEL -i IMAGE --mask MASK -p PROMPT [-n NEGATIVE] [--steps N] [--cfg S] "
