@@ -13,8 +13,9 @@
 
 static const char *DESC_COMMON =
     "The model is a single-file Stable Diffusion checkpoint (.safetensors or .ckpt: SD 1.x, SD 2.x,\n"
-    "their inpainting versions); its yaml configuration beside it (same name, .yaml) or --config\n"
-    "gives the head split and v-prediction when they differ from the family's defaults, --vae and\n"
+    "their inpainting versions) or a diffusers folder (unet/, vae/, text_encoder/, tokenizer/,\n"
+    "scheduler/); a single file's yaml configuration beside it (same name, .yaml) or --config gives\n"
+    "the head split and v-prediction when they differ from the family's defaults; --vae and\n"
     "--text-encoder take those parts from other files. The prompt is tokenized with --tokenizer or\n"
     "OpenAI's CLIP vocabulary (docs/text.md); a prompt longer than the 77-token context is refused.\n"
     "Samplers: ddim (eta: --eta), pndm (diffusers' default for SD 1.5), euler, euler_a, dpmpp_2m;\n"
@@ -30,7 +31,7 @@ typedef struct sd_cli {
 } sd_cli;
 
 #define SD_OPTS(c)                                                                                                    \
-    {'m', "model", G3D_OPT_STRING, &(c)->paths.model, "MODEL", "Stable Diffusion checkpoint (.safetensors, .ckpt)"},    \
+    {'m', "model", G3D_OPT_STRING, &(c)->paths.model, "MODEL", "Stable Diffusion checkpoint (.safetensors, .ckpt) or diffusers folder"},    \
     {'p', "prompt", G3D_OPT_STRING, &(c)->prompt, "TEXT", "what to draw"},                                            \
     {'n', "negative", G3D_OPT_STRING, &(c)->negative, "TEXT", "what to avoid (the unconditional prompt)"},             \
     {0, "steps", G3D_OPT_INT, &(c)->steps, "N", "denoising steps"},                                                   \
