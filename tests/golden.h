@@ -47,6 +47,19 @@ static inline double golden_compare(const g3d_ckpt *act, const char *name, const
     return e;
 }
 
+/* The recorded tensor `name` as float32 (malloc'd) and its element count in *n (n may be NULL);
+ * NULL, after a failed check, when it is missing. */
+static inline float *golden_floats(const g3d_ckpt *act, const char *name, size_t *n)
+{
+    const g3d_tensor_info *t = g3d_ckpt_find(act, name);
+    float *x = NULL;
+    CHECK_MSG(t != NULL, "%s missing", name);
+    if (!t) return NULL;
+    CHECK_OK(g3d_ckpt_read_alloc(act, name, 0, NULL, &x));
+    if (n) *n = (size_t)t->numel;
+    return x;
+}
+
 /* A recorded U8 picture `name` [h, w, 3] as RGB floats in [0, 1] (malloc'd) and its size;
  * NULL, after a failed check, when it is missing or not [h, w, 3]. */
 static inline float *golden_image(const g3d_ckpt *act, const char *name, int *w, int *h)

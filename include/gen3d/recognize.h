@@ -23,6 +23,8 @@ typedef enum g3d_model_kind {
     G3D_MODEL_LAMA,              /* LaMa's FFC generator under "generator.model." (a Lightning
                                     checkpoint) or "model." (the generator alone) */
     G3D_MODEL_SAM,               /* Segment Anything: image_encoder.*, prompt_encoder.*, mask_decoder.* */
+    G3D_MODEL_STABLE_DIFFUSION,  /* a latent-diffusion UNet (model.diffusion_model.*, sd.h), with
+                                    or without its VAE and text encoder */
     G3D_MODEL_KIND_COUNT
 } g3d_model_kind;
 

@@ -4,9 +4,12 @@
 #include "gen3d/blip.h"
 #include "gen3d/clip.h"
 #include "gen3d/clip_text.h"
+#include "gen3d/sd.h"
 
 #include <cjson/cJSON.h>
 #include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
 
 /* Where LaMa's generator layers start ("generator.model." or "model."), or NULL. */
 static const char *lama_prefix(const g3d_ckpt *ck)
@@ -21,6 +24,8 @@ g3d_model_kind g3d_model_recognize(const g3d_ckpt *ck)
     if (cJSON_IsObject(cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "model_config"))) return G3D_MODEL_MOGE;
     if (g3d_ckpt_find(ck, "pretrained.blocks.0.attn.qkv.weight") && g3d_ckpt_find(ck, "depth_head.scratch.output_conv2.2.weight"))
         return G3D_MODEL_DEPTH_ANYTHING_V2;
+    g3d_sd_unet_config unet;
+    if (g3d_sd_unet_probe(ck, NULL, &unet) == G3D_OK) return G3D_MODEL_STABLE_DIFFUSION;
     g3d_clip_text_config clip;
     if (g3d_clip_text_probe(ck, NULL, &clip) == G3D_OK) return G3D_MODEL_CLIP_TEXT;
     g3d_error_clear();
@@ -71,6 +76,15 @@ static long long dim0(const g3d_ckpt *ck, const char *name)
     return t && t->ndim > 0 ? (long long)t->shape[0] : 0;
 }
 
+static const char *vae_describe(const g3d_sd_vae_config *v, char *buf, size_t n)
+{
+    char mult[64] = "";
+    for (int l = 0; l < v->levels; l++) snprintf(mult + strlen(mult), sizeof mult - strlen(mult), "%s%d", l ? "/" : "", v->mult[l]);
+    snprintf(buf, n, "Stable Diffusion VAE (channels %d, multipliers %s, %d res blocks, %d latent channels, 1/%d scale)", v->ch,
+             mult, v->nres, v->z_ch, v->factor);
+    return buf;
+}
+
 const char *g3d_model_describe(const g3d_ckpt *ck, char *buf, size_t n)
 {
     /* Depth Anything V2: DINOv2 under "pretrained.", DPT head under "depth_head."; sizes from
@@ -117,10 +131,32 @@ const char *g3d_model_describe(const g3d_ckpt *ck, char *buf, size_t n)
         return buf;
     }
     g3d_error_clear();
-    /* a CLIP text tower, alone or inside a Stable Diffusion checkpoint */
+    /* a Stable Diffusion UNet, with the VAE and the text encoder when the file holds them */
+    g3d_sd_unet_config unet;
     g3d_clip_text_config clip;
-    if (g3d_clip_text_probe(ck, NULL, &clip) == G3D_OK) return g3d_clip_text_describe(&clip, buf, n);
+    int has_clip = g3d_clip_text_probe(ck, NULL, &clip) == G3D_OK;
+    char *yaml = g3d_sd_yaml_beside(g3d_ckpt_path(ck));
+    g3d_status urc = g3d_sd_unet_probe(ck, yaml, &unet);
+    free(yaml);
+    if (urc == G3D_OK) {
+        g3d_sd_vae_config vae;
+        g3d_sd_unet_describe(&unet, buf, n);
+        size_t k = strlen(buf);
+        if (g3d_sd_vae_probe(ck, &vae) == G3D_OK && k + 2 < n) {
+            snprintf(buf + k, n - k, "; ");
+            k += 2 + strlen(vae_describe(&vae, buf + k + 2, n - k - 2));
+        }
+        if (has_clip && k < n) {
+            snprintf(buf + k, n - k, "; ");
+            g3d_clip_text_describe(&clip, buf + k + 2, n - k - 2 > 0 ? n - k - 2 : 0);
+        }
+        g3d_error_clear();
+        return buf;
+    }
+    g3d_sd_vae_config vae;
+    if (g3d_sd_vae_probe(ck, &vae) == G3D_OK) return vae_describe(&vae, buf, n);
     g3d_error_clear();
+    if (has_clip) return g3d_clip_text_describe(&clip, buf, n);
     /* LaMa: residual blocks are the layers with a conv1; widths from their BatchNorms */
     const char *lp = lama_prefix(ck);
     if (lp) {

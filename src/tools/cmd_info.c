@@ -152,7 +152,7 @@ static int info_checkpoint(const char *path)
     g3d_ckpt *ck;
     g3d_status rc = g3d_ckpt_open(path, &ck);
     if (rc != G3D_OK) return g3d_cli_fail(rc);
-    char arch[256];
+    char arch[1024];
     const char *a = g3d_model_describe(ck, arch, sizeof arch);
     printf("%s: checkpoint, %lld tensors, %lld parameters%s%s\n", path, (long long)g3d_ckpt_count(ck),
            (long long)g3d_ckpt_numel(ck), a ? ", " : "", a ? a : "");

@@ -1,11 +1,14 @@
-/* gen3d inpaint: fill the masked part of one image with LaMa or the classical inpainter. */
+/* gen3d inpaint: fill the masked part of one image with Stable Diffusion (-m, sd_opts.c), LaMa
+ * or the classical inpainter. */
 #include "cli.h"
 #include "gen3d/image.h"
 #include "gen3d/imageio.h"
 #include "gen3d/inpaint_classic.h"
 #include "gen3d/lama.h"
+#include "sd_opts.h"
 
 #include <stdio.h>
+#include <string.h>
 
 static const char *DESCRIPTION =
     "Fills the holes of an image: with LaMa (--lama, the official big-lama/models/best.ckpt or any\n"
@@ -13,10 +16,21 @@ static const char *DESCRIPTION =
     "inpainter. As in LaMa's predict script, every non-zero mask pixel is a hole (grey masks: any\n"
     "value above 0), the picture is padded to a multiple of 8 and only the hole takes the\n"
     "network's output; known pixels are written back unchanged. An empty mask writes the image\n"
-    "unchanged (and says so); a mask of another size or one covering the whole image is an error.";
+    "unchanged (and says so); a mask of another size or one covering the whole image is an error.\n"
+    "With -m MODEL a Stable Diffusion checkpoint fills the holes from a prompt instead\n"
+    "(gen3d inpaint -m MODEL --help lists its options; docs/diffusion.md).";
+
+/* -m/--model selects the Stable Diffusion back end, which has options of its own. */
+static int wants_diffusion(int argc, char **argv)
+{
+    for (int i = 1; i < argc; i++)
+        if (!strcmp(argv[i], "-m") || !strcmp(argv[i], "--model") || !strncmp(argv[i], "--model=", 8)) return 1;
+    return 0;
+}
 
 static int run(int argc, char **argv)
 {
+    if (wants_diffusion(argc, argv)) return g3d_sd_cli_inpaint(argc, argv);
     g3d_cli_common common;
     const char *input = NULL, *mask_path = NULL, *lama = NULL;
     g3d_cli_common_init(&common);
@@ -29,7 +43,7 @@ static int run(int argc, char **argv)
     };
     const char *pos[1];
     int npos, prc = g3d_cli_parse(argc, argv, opts, G3D_COUNTOF(opts),
-                                  "gen3d inpaint [--lama CKPT] -i IMAGE --mask MASK -o OUT.png", DESCRIPTION, pos, 0, &npos);
+                                  "gen3d inpaint [--lama CKPT | -m MODEL -p PROMPT] -i IMAGE --mask MASK -o OUT.png", DESCRIPTION, pos, 0, &npos);
     if (prc) return prc < 0 ? G3D_EXIT_OK : prc;
     if (!input || !mask_path || !common.output) return g3d_cli_errorf(G3D_EXIT_USAGE, "-i, --mask and -o are required");
     g3d_cli_common_apply(&common);
@@ -74,4 +88,4 @@ done:
     return code;
 }
 
-const g3d_command g3d_cmd_inpaint = {"inpaint", "fill the holes of an image (LaMa or classical PatchMatch)", run};
+const g3d_command g3d_cmd_inpaint = {"inpaint", "fill the holes of an image (Stable Diffusion, LaMa or classical PatchMatch)", run};

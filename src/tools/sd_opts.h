@@ -1,0 +1,11 @@
+/* sd_opts.h - the Stable Diffusion commands' logic (gen3d txt2img, gen3d inpaint -m MODEL),
+ * kept out of the command files so that an inpaint command with other back ends can call it. */
+#ifndef G3D_SD_OPTS_H
+#define G3D_SD_OPTS_H
+
+/* gen3d txt2img: argv[0] is the command name. Returns the exit code. */
+int g3d_sd_cli_txt2img(int argc, char **argv);
+/* gen3d inpaint with a Stable Diffusion model (-m MODEL -i IMAGE --mask MASK -p PROMPT). */
+int g3d_sd_cli_inpaint(int argc, char **argv);
+
+#endif
