@@ -40,6 +40,7 @@
 #define G3D_GENERATE_H
 
 #include "gen3d/depth_estimators.h"
+#include "gen3d/explore.h"
 #include "gen3d/frame.h"
 #include "gen3d/layers.h"
 #include "gen3d/providers.h"
@@ -101,6 +102,8 @@ typedef struct g3d_generate_params {
     const char *video_trajectory;     /* "swing" or a preset (render.h g3d_render_flythrough) */
     int video_frames;                 /* 120 */
     g3d_video_params video_params;
+    g3d_explore_params explore;       /* the exploration set whose coverage the run measures
+                                         (explore.h; d: a quarter of the input's median depth) */
     /* ---- the run ---- */
     uint64_t seed;                    /* 42 */
     g3d_progress progress;
@@ -122,6 +125,9 @@ typedef struct g3d_generate_result {
     int video_written;                /* video.mp4 exists */
     const char *video_note;           /* why no video was written when one was asked for (static), or NULL */
     int viewer_written;               /* viewer.html exists (the viewer template is installed) */
+    double explore_distance;          /* d of the exploration set, metres (0 when not measured) */
+    double explore_empty[G3D_EXPLORE_CAMERAS];  /* empty-pixel fraction per exploration camera */
+    double explore_mean_empty, explore_max_empty;  /* their mean and largest */
     g3d_gaussians scene;              /* the trained Gaussians (empty when the run stopped earlier) */
 } g3d_generate_result;
 

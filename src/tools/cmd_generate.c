@@ -23,6 +23,10 @@ static const char *description(void)
                      "  cameras.json, transforms.json  the training cameras (images under dataset/)\n"
                      "  points.ply       the aggregated coloured point cloud the Gaussians started from\n"
                      "  config.json      every setting and the seed; summary.json: timings and figures\n"
+                     "  exploration.png  the scene from 27 cameras a visitor reaches around the input view\n"
+                     "                   (sideways, up/down and forward steps, turns), empty pixels in magenta;\n"
+                     "                   their cameras in exploration_cameras.json, the empty fractions in\n"
+                     "                   summary.json\n"
                      "  dataset/         the world-generation folder (views, depth, masks, points.ply, log)\n"
                      "A summary (timings per stage, Gaussian count, training PSNR) goes to stdout.\n"
                      "--world DIR trains on a world folder written earlier (by `gen3d world`, or a dataset/)\n"
@@ -54,6 +58,8 @@ static int run(int argc, char **argv)
         {0, "frames", G3D_OPT_INT, &p.video_frames, "N", "video frames"},
         {0, "fps", G3D_OPT_INT, &p.video_params.fps, "N", "video frame rate"},
         {0, "no-video", G3D_OPT_FLAG, &no_video, NULL, "skip the fly-through video"},
+        {0, "explore-distance", G3D_OPT_DOUBLE, &p.explore.distance, "M", "exploration set: step d in metres (0: a quarter of the median depth)"},
+        {0, "explore-angle", G3D_OPT_DOUBLE, &p.explore.angle_deg, "DEG", "exploration set: yaw and pitch reach, degrees (0..90)"},
         G3D_COMMON_OPTS(&common),
     };
     const char *pos[1];
@@ -66,6 +72,10 @@ static int run(int argc, char **argv)
     if (p.sh_degree < 0 || p.sh_degree > 3) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sh-degree must be in 0..3");
     if (p.video_frames < 2 || p.video_frames > 100000) return g3d_cli_errorf(G3D_EXIT_USAGE, "--frames must be in 2..100000");
     if (p.video_params.fps < 1 || p.video_params.fps > 240) return g3d_cli_errorf(G3D_EXIT_USAGE, "--fps must be in 1..240");
+    if (!(p.explore.distance >= 0 && p.explore.distance <= 1e4))
+        return g3d_cli_errorf(G3D_EXIT_USAGE, "--explore-distance must be in 0..10000 metres");
+    if (!(p.explore.angle_deg >= 0 && p.explore.angle_deg < 90))
+        return g3d_cli_errorf(G3D_EXIT_USAGE, "--explore-angle must be at least 0 and below 90 degrees");
     if (p.world_dir && (in.rgb || in.depth_model))
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--world trains on a generated world: no -i or --depth-model");
     g3d_cli_common_apply(&common);
@@ -94,6 +104,8 @@ static int run(int argc, char **argv)
            (long long)r.initial_gaussians, (long long)r.gaussians, r.train_psnr);
     printf("  outputs   %6.1f s  %s\n", s[G3D_STAGE_OUTPUTS],
            !p.video ? "preview" : r.video_written ? "preview, video.mp4" : "preview, PNG frames (no video)");
+    printf("  explore             %d cameras within %.2f m: %.3f %% empty pixels on average, %.3f %% at worst\n",
+           G3D_EXPLORE_CAMERAS, r.explore_distance, 100 * r.explore_mean_empty, 100 * r.explore_max_empty);
     printf("  total     %6.1f s\n", r.seconds_total);
     g3d_generate_result_free(&r);
     return G3D_EXIT_OK;
