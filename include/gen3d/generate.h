@@ -88,6 +88,9 @@ typedef struct g3d_generate_params {
                                          another length is picked down or up to steps + 1 poses
                                          (g3d_trajectory_pick); 0: as it is */
     g3d_world_params world;
+    int explore_views;                /* 1: after the trajectory, generation steps at the
+                                         exploration set's cameras (`explore` below), so that
+                                         what they see behind depth edges is filled (default) */
     /* ---- splats ---- */
     int sh_degree;                    /* 0..3 (3) */
     g3d_train_params train;           /* g3d_train_params_default(&p.train, 3000); its seed is

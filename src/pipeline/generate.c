@@ -44,6 +44,7 @@ void g3d_generate_params_default(g3d_generate_params *p)
     p->video_frames = 120;
     g3d_video_params_default(&p->video_params);
     g3d_explore_params_default(&p->explore);
+    p->explore_views = 1;
     p->seed = 42;
 }
 
@@ -205,6 +206,25 @@ static g3d_status stage_layers(run *r)
 
 /* ---- world ----------------------------------------------------------------------------------- */
 
+/* Generation steps at the exploration set's cameras (all but the input's own), after the
+ * trajectory: a rotation reveals nothing behind the input's depth edges, and the set's
+ * steps and turns do, so their holes are inpainted and lifted like any step's. */
+static g3d_status append_explore_poses(const g3d_generate_params *p, const g3d_frame *f, g3d_mat4 **poses, int *n)
+{
+    g3d_camera origin = {f->cam.K, g3d_mat4_identity()}, *cams;
+    G3D_TRY(g3d_explore_cameras(&origin, g3d_depth_median(&f->depth), &p->explore, &cams, NULL));
+    g3d_mat4 *all = realloc(*poses, sizeof **poses * (size_t)(*n + G3D_EXPLORE_CAMERAS));
+    if (!all) {
+        free(cams);
+        return G3D_ERR(G3D_ERR_NOMEM, "generate: out of memory");
+    }
+    *poses = all;
+    for (int i = 0; i < G3D_EXPLORE_CAMERAS; i++)
+        if (g3d_mat4_max_abs_diff(cams[i].c2w, g3d_mat4_identity()) > 1e-12) all[(*n)++] = cams[i].c2w;
+    free(cams);
+    return G3D_OK;
+}
+
 /* The trajectory's poses: a camera file, or a preset scaled by the input's median depth;
  * then picked to steps + 1 poses when steps is given. */
 static g3d_status make_poses(const g3d_generate_params *p, const g3d_frame *f, g3d_mat4 **poses, int *n)
@@ -232,6 +252,7 @@ static g3d_status make_poses(const g3d_generate_params *p, const g3d_frame *f, g
             *n = p->steps + 1;
         }
     }
+    if (rc == G3D_OK && p->explore_views) rc = append_explore_poses(p, f, poses, n);
     if (rc != G3D_OK) {
         free(*poses);
         *poses = NULL;
@@ -467,6 +488,9 @@ static cJSON *config_json(const run *r)
         if (p->layers) cJSON_AddStringToObject(c, "mask_provider", r->masks->name);
         if (p->depth_model && !p->depth) cJSON_AddStringToObject(c, "depth_model", p->depth_model);
     }
+    if (!p->world_dir) cJSON_AddBoolToObject(c, "explore_views", p->explore_views);
+    cJSON_AddNumberToObject(c, "explore_distance", p->explore.distance);
+    cJSON_AddNumberToObject(c, "explore_angle", p->explore.angle_deg);
     cJSON_AddNumberToObject(c, "iterations", (double)p->train.iterations);
     cJSON_AddNumberToObject(c, "sh_degree", p->sh_degree);
     cJSON_AddStringToObject(c, "video_trajectory", p->video_trajectory);

@@ -47,7 +47,7 @@ static int run(int argc, char **argv)
     g3d_cli_world_init(&wo);
     common.output = "scene";
     common.seed = (int64_t)p.seed;
-    int iters = (int)p.train.iterations, no_video = !p.video;
+    int iters = (int)p.train.iterations, no_video = !p.video, no_explore_views = !p.explore_views;
     g3d_opt opts[] = {
         G3D_INPUT_OPTS(&in),
         G3D_WORLD_OPTS(&wo),
@@ -58,6 +58,7 @@ static int run(int argc, char **argv)
         {0, "frames", G3D_OPT_INT, &p.video_frames, "N", "video frames"},
         {0, "fps", G3D_OPT_INT, &p.video_params.fps, "N", "video frame rate"},
         {0, "no-video", G3D_OPT_FLAG, &no_video, NULL, "skip the fly-through video"},
+        {0, "no-explore-views", G3D_OPT_FLAG, &no_explore_views, NULL, "no generation steps at the exploration cameras"},
         {0, "explore-distance", G3D_OPT_DOUBLE, &p.explore.distance, "M", "exploration set: step d in metres (0: a quarter of the median depth)"},
         {0, "explore-angle", G3D_OPT_DOUBLE, &p.explore.angle_deg, "DEG", "exploration set: yaw and pitch reach, degrees (0..90)"},
         G3D_COMMON_OPTS(&common),
@@ -84,6 +85,7 @@ static int run(int argc, char **argv)
     g3d_cli_world_apply(&wo, &p);
     g3d_train_params_default(&p.train, iters);
     p.video = !no_video;
+    p.explore_views = !no_explore_views;
     p.output_dir = common.output;
     p.seed = (uint64_t)common.seed;
     p.progress = g3d_cli_progress();

@@ -52,10 +52,43 @@ double g3d_depth_median(const g3d_image *depth)
     return m;
 }
 
-/* Step 0: the input, and with layers the background hidden behind its foreground. */
-static g3d_status lift_input(g3d_world *w, const g3d_frame *in, const g3d_layers *layers)
+/* The input's depth with its gaps (a stereo matcher's occlusions, a sensor's dropouts) filled
+ * as a new view's holes are: estimated, then aligned to the known depth around them. Left
+ * unlifted, those pixels would be holes in the world from every camera, the input's too. */
+static g3d_status complete_input_depth(const g3d_frame *in, const g3d_depth_estimator *depth, const g3d_world_params *p,
+                                       g3d_image *out)
 {
-    G3D_TRY(g3d_cloud_lift(&w->cloud, &in->rgb, &in->depth, &w->cams[0], NULL, 0, &w->steps[0].points_added));
+    g3d_image holes = {0}, valid = {0}, est = {0};
+    size_t n = g3d_image_size(&in->depth), nh = 0;
+    G3D_TRY(g3d_image_clone(out, &in->depth));
+    for (size_t k = 0; k < n; k++) nh += !(in->depth.data[k] > 0);
+    if (!nh || nh == n) return G3D_OK;
+    g3d_status rc = g3d_image_create(&holes, in->depth.w, in->depth.h, 1);
+    if (rc == G3D_OK) rc = g3d_image_create(&valid, in->depth.w, in->depth.h, 1);
+    for (size_t k = 0; rc == G3D_OK && k < n; k++) {
+        holes.data[k] = !(in->depth.data[k] > 0);
+        valid.data[k] = 1.0f - holes.data[k];
+    }
+    g3d_intrinsics K = in->cam.K;
+    if (rc == G3D_OK) rc = depth->estimate(depth->ctx, &in->rgb, &in->depth, &holes, &est, &K);
+    if (rc == G3D_OK) rc = g3d_align_depth(&est, &in->depth, &valid, &p->align, NULL);
+    for (size_t k = 0; rc == G3D_OK && k < n; k++)
+        if (holes.data[k] > 0.5f) out->data[k] = est.data[k];
+    g3d_image_free(&holes);
+    g3d_image_free(&valid);
+    g3d_image_free(&est);
+    return rc;
+}
+
+/* Step 0: the input, and with layers the background hidden behind its foreground. */
+static g3d_status lift_input(g3d_world *w, const g3d_frame *in, const g3d_depth_estimator *depth, const g3d_layers *layers,
+                             const g3d_world_params *p)
+{
+    g3d_image full = {0};
+    g3d_status rc = complete_input_depth(in, depth, p, &full);
+    if (rc == G3D_OK) rc = g3d_cloud_lift(&w->cloud, &in->rgb, &full, &w->cams[0], NULL, 0, &w->steps[0].points_added);
+    g3d_image_free(&full);
+    G3D_TRY(rc);
     if (layers) {
         G3D_TRY(g3d_layers_clone(&w->layers, layers));
         if (w->layers.n_foreground) {
@@ -140,7 +173,7 @@ g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int
         out->cams[i].K = input->cam.K;
         out->cams[i].c2w = g3d_mat4_mul(input->cam.c2w, poses[i]);
     }
-    if (rc == G3D_OK) rc = lift_input(out, input, layers);
+    if (rc == G3D_OK) rc = lift_input(out, input, depth, layers, p);
     if (rc == G3D_OK && g3d_progress_report(&p->progress, "world", 1, n_poses, NULL))
         rc = G3D_ERR(G3D_CANCELLED, "world generation cancelled");
     for (int i = 1; i < n_poses && rc == G3D_OK; i++) {
