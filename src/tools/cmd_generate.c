@@ -47,7 +47,7 @@ static int run(int argc, char **argv)
     g3d_cli_world_init(&wo);
     common.output = "scene";
     common.seed = (int64_t)p.seed;
-    int iters = (int)p.train.iterations, no_video = !p.video, no_explore_views = !p.explore_views;
+    int iters = (int)p.train.iterations, no_video = !p.video;
     g3d_opt opts[] = {
         G3D_INPUT_OPTS(&in),
         G3D_WORLD_OPTS(&wo),
@@ -58,9 +58,6 @@ static int run(int argc, char **argv)
         {0, "frames", G3D_OPT_INT, &p.video_frames, "N", "video frames"},
         {0, "fps", G3D_OPT_INT, &p.video_params.fps, "N", "video frame rate"},
         {0, "no-video", G3D_OPT_FLAG, &no_video, NULL, "skip the fly-through video"},
-        {0, "no-explore-views", G3D_OPT_FLAG, &no_explore_views, NULL, "no generation steps at the exploration cameras"},
-        {0, "explore-distance", G3D_OPT_DOUBLE, &p.explore.distance, "M", "exploration set: step d in metres (0: a quarter of the median depth)"},
-        {0, "explore-angle", G3D_OPT_DOUBLE, &p.explore.angle_deg, "DEG", "exploration set: yaw and pitch reach, degrees (0..90)"},
         G3D_COMMON_OPTS(&common),
     };
     const char *pos[1];
@@ -73,10 +70,6 @@ static int run(int argc, char **argv)
     if (p.sh_degree < 0 || p.sh_degree > 3) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sh-degree must be in 0..3");
     if (p.video_frames < 2 || p.video_frames > 100000) return g3d_cli_errorf(G3D_EXIT_USAGE, "--frames must be in 2..100000");
     if (p.video_params.fps < 1 || p.video_params.fps > 240) return g3d_cli_errorf(G3D_EXIT_USAGE, "--fps must be in 1..240");
-    if (!(p.explore.distance >= 0 && p.explore.distance <= 1e4))
-        return g3d_cli_errorf(G3D_EXIT_USAGE, "--explore-distance must be in 0..10000 metres");
-    if (!(p.explore.angle_deg >= 0 && p.explore.angle_deg < 90))
-        return g3d_cli_errorf(G3D_EXIT_USAGE, "--explore-angle must be at least 0 and below 90 degrees");
     if (p.world_dir && (in.rgb || in.depth_model))
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--world trains on a generated world: no -i or --depth-model");
     g3d_cli_common_apply(&common);
@@ -85,7 +78,6 @@ static int run(int argc, char **argv)
     g3d_cli_world_apply(&wo, &p);
     g3d_train_params_default(&p.train, iters);
     p.video = !no_video;
-    p.explore_views = !no_explore_views;
     p.output_dir = common.output;
     p.seed = (uint64_t)common.seed;
     p.progress = g3d_cli_progress();

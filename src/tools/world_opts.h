@@ -8,8 +8,8 @@
 
 typedef struct g3d_cli_world {
     const char *trajectory;
-    int steps, extra, max_side, no_layers;
-    double angle, distance;
+    int steps, extra, max_side, no_layers, no_explore_views;
+    double angle, distance, explore_distance, explore_angle;
 } g3d_cli_world;
 
 #define G3D_WORLD_OPTS(w)                                                                                         \
@@ -19,7 +19,10 @@ typedef struct g3d_cli_world {
     {0, "distance", G3D_OPT_DOUBLE, &(w)->distance, "M", "moving presets: distance in metres (0: a quarter of the median depth)"}, \
     {0, "extra", G3D_OPT_INT, &(w)->extra, "M", "extra training views rendered from the final cloud"},               \
     {0, "max-side", G3D_OPT_INT, &(w)->max_side, "PX", "downscale the input so that its longer side is at most this"}, \
-    {0, "no-layers", G3D_OPT_FLAG, &(w)->no_layers, NULL, "skip the foreground/background split"}
+    {0, "no-layers", G3D_OPT_FLAG, &(w)->no_layers, NULL, "skip the foreground/background split"},               \
+    {0, "no-explore-views", G3D_OPT_FLAG, &(w)->no_explore_views, NULL, "no generation steps at the exploration cameras"}, \
+    {0, "explore-distance", G3D_OPT_DOUBLE, &(w)->explore_distance, "M", "exploration set: step d in metres (0: a quarter of the median depth)"}, \
+    {0, "explore-angle", G3D_OPT_DOUBLE, &(w)->explore_angle, "DEG", "exploration set: yaw and pitch reach in degrees, below 90"}
 
 /* The library's defaults (g3d_generate_params_default). */
 void g3d_cli_world_init(g3d_cli_world *w);

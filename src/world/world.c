@@ -18,6 +18,7 @@ void g3d_world_params_default(g3d_world_params *p)
     memset(p, 0, sizeof *p);
     p->extra_views = 10;
     p->extra_angle_deg = 5.0;
+    p->hole_stride = 2;
     g3d_cloud_render_params_default(&p->render);
     g3d_align_params_default(&p->align);
 }
@@ -136,7 +137,7 @@ static g3d_status world_step(g3d_world *w, int i, const g3d_inpainter *inpaint, 
     /* The view keeps the cloud's depth where the cloud covered it: only the holes are new. */
     for (size_t k = 0; k < n; k++) if (mask.data[k] >= 0.5f) est.data[k] = cloud_d.data[k];
     t = g3d_time_now();
-    if (nh) rc = g3d_cloud_lift(&w->cloud, &rgb, &est, cam, &holes, i, &st->points_added);
+    if (nh) rc = g3d_cloud_lift_sparse(&w->cloud, &rgb, &est, cam, &holes, i, p->hole_stride, &st->points_added);
     st->seconds_lift = g3d_time_now() - t;
     if (rc != G3D_OK) goto done;
     w->rgb[i] = rgb;
@@ -160,6 +161,7 @@ g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int
     if (!p) p = &def;
     memset(out, 0, sizeof *out);
     if (n_poses < 1 || n_poses > 10000) return G3D_ERR(G3D_ERR_ARG, "world: %d poses (need 1..10000)", n_poses);
+    if (p->hole_stride < 1 || p->hole_stride > 16) return G3D_ERR(G3D_ERR_ARG, "world: hole stride %d (need 1..16)", p->hole_stride);
     if (p->extra_views < 0 || p->extra_views > 10000) return G3D_ERR(G3D_ERR_ARG, "world: %d extra views (need 0..10000)", p->extra_views);
     G3D_TRY(g3d_frame_validate(input, input->name[0] ? input->name : "input"));
     g3d_status rc = g3d_cloud_init(&out->cloud);
