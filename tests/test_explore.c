@@ -165,18 +165,20 @@ TEST(procedural_room_is_explorable)
 {
     g3d_frame f;
     memset(&f, 0, sizeof f);
-    f.cam = g3d_procscene_default_camera(96, 72);
+    f.cam = g3d_procscene_default_camera(64, 48);
     CHECK_OK(g3d_procscene_render(&f.cam, &f.rgb, &f.depth, NULL));
     snprintf(f.name, sizeof f.name, "procedural room");
     g3d_generate_result with, without;
-    generate(&f, 1, 300, &with);
-    generate(&f, 0, 300, &without);
+    generate(&f, 1, 600, &with);
+    generate(&f, 0, 100, &without);
     report("with steps at the exploration cameras", &with);
     report("rotation only", &without);
     CHECK(with.views == 3 + G3D_EXPLORE_CAMERAS - 1 && without.views == 3);
     CHECK(with.explore_distance > 0 && with.explore_distance == without.explore_distance);
     CHECK(with.explore_mean_empty <= 0.001);
     CHECK(with.explore_max_empty <= 0.005);
+    /* the rotation alone leaves what lies behind the depth edges and beyond the turn unseen; its
+     * shorter schedule is no excuse: those pixels have no Gaussian at all */
     CHECK(without.explore_mean_empty > 10 * with.explore_mean_empty);
     g3d_generate_result_free(&with);
     g3d_generate_result_free(&without);
@@ -230,7 +232,7 @@ TEST(icl_living_room_is_explorable)
                                  test_shared("testdata/icl_nuim_livingroom1_open3d/depth/00000.png"), 1000, K, 0, &f));
     CHECK_OK(g3d_frame_limit_size(&f, 128));
     g3d_generate_result r;
-    generate(&f, 1, 300, &r);
+    generate(&f, 1, 600, &r);
     report("ICL-NUIM living room 0", &r);
     CHECK(r.explore_mean_empty <= ICL_MEAN_FLOOR);
     CHECK(r.explore_max_empty <= ICL_WORST_FLOOR);
