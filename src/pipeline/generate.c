@@ -89,6 +89,12 @@ static g3d_status check_cancel(const run *r)
     return g3d_cancel_requested(&r->p->cancel) ? G3D_ERR(G3D_CANCELLED, "cancelled") : G3D_OK;
 }
 
+/* The run builds the exploration set: to measure the scene, or for generation steps. */
+static int uses_explore(const g3d_generate_params *p)
+{
+    return p->last_stage == G3D_STAGE_OUTPUTS || (p->explore_views && !p->world_dir && p->last_stage == G3D_STAGE_WORLD);
+}
+
 /* Everything that can be refused without work is refused before any: a mistyped path name
  * fails now, not after minutes of training. */
 static g3d_status check_params(const g3d_generate_params *p)
@@ -111,7 +117,7 @@ static g3d_status check_params(const g3d_generate_params *p)
         G3D_TRY(g3d_render_flythrough(p->video_trajectory, NULL, NULL, &probe, 1.0, 2, &cams, &n));
         free(cams);
     }
-    if (p->last_stage == G3D_STAGE_OUTPUTS) {
+    if (uses_explore(p)) {
         /* the distance's bound depends on the scene: checked again once the input is known */
         double d = p->explore.distance;
         g3d_camera probe = {g3d_intrinsics_from_fov(60, 64, 48), g3d_mat4_identity()}, *cams = NULL;
@@ -346,7 +352,7 @@ static g3d_camera explore_origin(const run *r, double *scale)
         return r->input->cam;
     }
     if (w->n_views && w->depth[0].data) *scale = g3d_depth_median(&w->depth[0]);
-    return w->cams[0];
+    return w->n_views ? w->cams[0] : w->extra_cams[0];
 }
 
 /* The exploration set (*cams malloc'd), refused as soon as the scene's scale is known. */
@@ -645,7 +651,7 @@ g3d_status g3d_generate(const g3d_generate_params *p, g3d_generate_result *res_o
         res.seconds[st] = g3d_time_now() - t;
         if (rc == G3D_OK) rc = check_cancel(&r);
         /* a distance too long for this scene is refused before the work, not after it */
-        if (rc == G3D_OK && st == (p->world_dir ? G3D_STAGE_WORLD : G3D_STAGE_INPUT) && p->last_stage == G3D_STAGE_OUTPUTS) {
+        if (rc == G3D_OK && st == (p->world_dir ? G3D_STAGE_WORLD : G3D_STAGE_INPUT) && uses_explore(p)) {
             g3d_camera *cams;
             double d;
             rc = explore_set(&r, &cams, &d);
