@@ -297,22 +297,15 @@ static g3d_status stage_world(run *r)
 
 /* ---- splats ---------------------------------------------------------------------------------- */
 
-/* The training views: every generated view whole, the extra views on their valid pixels.
- * The last n_explore generated views are the exploration steps; the trajectory's views are
- * listed as many times as it takes for them to keep at least half of the iterations, since
- * the input view holds all of the real detail and the steps mostly fill what it lacks. */
-static g3d_status train_views(const g3d_world *w, int n_explore, g3d_train_view **out, int *n)
+/* The training views: every generated view whole, the extra views on their valid pixels. */
+static g3d_status train_views(const g3d_world *w, g3d_train_view **out, int *n)
 {
-    int n_traj = w->n_views - n_explore, repeat = n_traj > 0 ? (n_explore + n_traj - 1) / n_traj : 0;
-    if (repeat < 1) repeat = 1;
-    *n = repeat * n_traj + n_explore + w->n_extra;
+    *n = w->n_views + w->n_extra;
     g3d_train_view *v = g3d_calloc((size_t)*n, sizeof *v, "training views");
     if (!v) return G3D_ERR_NOMEM;
-    int k = 0;
-    for (int r = 0; r < repeat; r++)
-        for (int i = 0; i < n_traj; i++) v[k++] = (g3d_train_view){w->cams[i], &w->rgb[i], NULL};
-    for (int i = n_traj; i < w->n_views; i++) v[k++] = (g3d_train_view){w->cams[i], &w->rgb[i], NULL};
-    for (int i = 0; i < w->n_extra; i++) v[k++] = (g3d_train_view){w->extra_cams[i], &w->extra_rgb[i], &w->extra_mask[i]};
+    for (int i = 0; i < w->n_views; i++) v[i] = (g3d_train_view){w->cams[i], &w->rgb[i], NULL};
+    for (int i = 0; i < w->n_extra; i++)
+        v[w->n_views + i] = (g3d_train_view){w->extra_cams[i], &w->extra_rgb[i], &w->extra_mask[i]};
     *out = v;
     return G3D_OK;
 }
@@ -323,8 +316,7 @@ static g3d_status stage_splats(run *r)
     const g3d_world *w = &r->world;
     g3d_train_view *views = NULL;
     int nviews = 0;
-    int n_explore = p->explore_views && !p->world_dir && w->n_views >= G3D_EXPLORE_CAMERAS ? G3D_EXPLORE_CAMERAS - 1 : 0;
-    G3D_TRY(train_views(w, n_explore, &views, &nviews));
+    G3D_TRY(train_views(w, &views, &nviews));
     g3d_status rc;
     if (w->cloud.n > 0) {
         rc = g3d_gaussians_init_from_points(&r->scene, w->cloud.xyz, w->cloud.rgb, w->cloud.n, p->sh_degree);
