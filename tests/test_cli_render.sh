@@ -73,6 +73,23 @@ expect 2 "worldscore with --frames" "$GEN3D" render --scene "$T/scene.ply" --tra
 expect 1 "unknown worldscore move" "$GEN3D" render --scene "$T/scene.ply" --trajectory worldscore:push_in,spin -o "$T/never"
 grep -q "spin" "$T/err" && grep -q "pan_right" "$T/err" && ok "names the move and lists the known ones" || bad "names the move and lists the known ones"
 
+# coverage: the empty-pixel fraction per camera, printed; nothing written
+cat > "$T/cover.json" <<'JSON'
+{"version": 1, "convention": "opencv_c2w", "frames": [
+ {"fx": 20, "fy": 20, "cx": 15.5, "cy": 11.5, "width": 32, "height": 24, "c2w": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]},
+ {"fx": 20, "fy": 20, "cx": 15.5, "cy": 11.5, "width": 32, "height": 24, "c2w": [[-1,0,0,0],[0,1,0,0],[0,0,-1,0],[0,0,0,1]]}]}
+JSON
+expect 0 "coverage of a camera file" "$GEN3D" render --scene "$T/scene.ply" --trajectory "$T/cover.json" --coverage -o "$T/never"
+grep -q "^camera 1: 100.0000 % empty" "$T/out" && ok "a camera facing away is all empty" || bad "a camera facing away is all empty"
+f0=$(awk '/^camera 0:/ { print $3 }' "$T/out")
+awk -v f="$f0" 'BEGIN { exit !(f < 100) }' && grep -q "^mean .* worst 100.0000 %, over 2 cameras" "$T/out" \
+    && ok "coverage: the camera facing the wall sees it ($f0 % empty)" || bad "coverage: $(cat "$T/out")"
+expect 0 "coverage of the exploration set" "$GEN3D" render --scene "$T/scene.ply" --trajectory explore --width 32 --height 24 --coverage -o "$T/never"
+[ "$(grep -c '^camera ' "$T/out")" = 27 ] && ok "exploration set: 27 cameras" || bad "exploration set: 27 cameras"
+expect 2 "exploration angle of 90 degrees" "$GEN3D" render --scene "$T/scene.ply" --trajectory explore --explore-angle 90 --coverage -o "$T/never"
+expect 1 "exploration distance beyond the scene" "$GEN3D" render --scene "$T/scene.ply" --trajectory explore --distance 40 --coverage -o "$T/never"
+grep -q "median depth" "$T/err" && ok "names the distance problem" || bad "names the distance problem"
+
 # refusals
 expect 2 "no scene" "$GEN3D" render -o "$T/never"
 expect 2 "bad background" "$GEN3D" render --scene "$T/scene.ply" --background 1,2 -o "$T/never"

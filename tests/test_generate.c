@@ -25,6 +25,7 @@ static void small_params(g3d_generate_params *p, const g3d_frame *f, const char 
     p->steps = 2;
     p->trajectory_params.angle_deg = 20;
     p->world.extra_views = 2;
+    p->explore_views = 0;  /* test_explore.c runs them */
     p->sh_degree = 1;
     g3d_train_params_default(&p->train, 40);
     p->video = 0;
@@ -56,6 +57,14 @@ TEST(result_and_files_agree)
     CHECK(r.views == 3 && r.extra_views == 2 && r.width == 96 && r.height == 72);
     CHECK(r.points > 0 && r.initial_gaussians == r.points && r.gaussians == r.scene.n && r.scene.n > 0);
     CHECK(r.train_psnr > 15.0);
+    /* the exploration figures: the mean and worst of the per-camera fractions */
+    double mean = 0, worst = 0;
+    for (int i = 0; i < G3D_EXPLORE_CAMERAS; i++) {
+        CHECK(r.explore_empty[i] >= 0 && r.explore_empty[i] <= 1);
+        mean += r.explore_empty[i] / G3D_EXPLORE_CAMERAS;
+        worst = fmax(worst, r.explore_empty[i]);
+    }
+    CHECK(r.explore_distance > 0 && r.explore_mean_empty == mean && r.explore_max_empty == worst);
     double sum = 0;
     for (int s = 0; s < G3D_STAGE_COUNT; s++) {
         CHECK(r.seconds[s] >= 0);
@@ -69,7 +78,8 @@ TEST(result_and_files_agree)
     CHECK_OK(g3d_ply_read_gaussians(path, &g));
     CHECK(g.n == r.scene.n && g.sh_degree == 1 && !memcmp(g.means, r.scene.means, sizeof(float) * 3 * (size_t)g.n));
     const char *files[] = {"scene.spz", "preview.png", "cameras.json", "transforms.json", "points.ply", "config.json",
-                           "summary.json", "dataset/log.json", "dataset/views/view_002.png", "dataset/masks/extra_001.png"};
+                           "summary.json", "dataset/log.json", "dataset/views/view_002.png", "dataset/masks/extra_001.png",
+                           "exploration.png", "exploration_cameras.json"};
     for (size_t k = 0; k < sizeof files / sizeof *files; k++) {
         snprintf(path, sizeof path, "%s/%s", out, files[k]);
         CHECK_MSG(test_file_exists(path), "%s is missing", files[k]);
@@ -77,10 +87,11 @@ TEST(result_and_files_agree)
     g3d_gaussians_free(&g);
     g3d_generate_result_free(&r);
     CHECK(r.scene.n == 0);
-    /* no output folder: the same scene in memory only */
+    /* no output folder: the same scene in memory only, its exploration figures measured all the same */
     p.output_dir = NULL;
+    double mean_on_disk = mean;
     CHECK_OK(g3d_generate(&p, &r));
-    CHECK(r.scene.n > 0 && r.seconds[G3D_STAGE_OUTPUTS] < 1.0);
+    CHECK(r.scene.n > 0 && r.explore_mean_empty == mean_on_disk);
     g3d_generate_result_free(&r);
     g3d_frame_free(&f);
 }

@@ -46,6 +46,13 @@ g3d_status g3d_cloud_reserve(g3d_cloud *c, int64_t n);
 g3d_status g3d_cloud_lift(g3d_cloud *c, const g3d_image *rgb, const g3d_image *depth, const g3d_camera *cam,
                           const g3d_image *lift_mask, int32_t view, int64_t *added);
 
+/* The same at a lower density: each stride x stride block of lifted pixels becomes one point
+ * at its first pixel with a footprint `stride` pixels wide, unless that pixel is not lifted;
+ * then the block's lifted pixels become points of their own, so that regions narrower than a
+ * block keep every pixel. stride 1 is g3d_cloud_lift; 1..16. */
+g3d_status g3d_cloud_lift_sparse(g3d_cloud *c, const g3d_image *rgb, const g3d_image *depth, const g3d_camera *cam,
+                                 const g3d_image *lift_mask, int32_t view, int stride, int64_t *added);
+
 typedef struct g3d_cloud_render_params {
     float depth_tolerance;  /* relative: points within z_min * (1 + tol) are blended (0.02) */
     float footprint_scale;  /* multiplies each point's projected footprint (1.0) */

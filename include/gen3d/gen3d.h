@@ -73,6 +73,7 @@
 
 #include "gen3d/adam.h"
 #include "gen3d/densify.h"
+#include "gen3d/explore.h"
 #include "gen3d/gaussians.h"
 #include "gen3d/init.h"
 #include "gen3d/loss.h"

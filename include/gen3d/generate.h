@@ -41,6 +41,7 @@
 #define G3D_GENERATE_H
 
 #include "gen3d/depth_estimators.h"
+#include "gen3d/explore.h"
 #include "gen3d/frame.h"
 #include "gen3d/layers.h"
 #include "gen3d/providers.h"
@@ -96,6 +97,10 @@ typedef struct g3d_generate_params {
                                          another length is picked down or up to steps + 1 poses
                                          (g3d_trajectory_pick); 0: as it is */
     g3d_world_params world;
+    int explore_views;                /* 1: after the trajectory, generation steps at the
+                                         exploration set's cameras (`explore` below), so that
+                                         what they see behind depth edges is filled (default 0:
+                                         they cost held-out fidelity, docs/explore.md) */
     /* ---- splats ---- */
     int sh_degree;                    /* 0..3 (3) */
     g3d_train_params train;           /* g3d_train_params_default(&p.train, 3000); its seed is
@@ -110,6 +115,8 @@ typedef struct g3d_generate_params {
     const char *video_trajectory;     /* "swing" or a preset (render.h g3d_render_flythrough) */
     int video_frames;                 /* 120 */
     g3d_video_params video_params;
+    g3d_explore_params explore;       /* the exploration set whose coverage the run measures
+                                         (explore.h; d: a quarter of the input's median depth) */
     /* ---- the run ---- */
     uint64_t seed;                    /* 42 */
     g3d_progress progress;
@@ -131,6 +138,9 @@ typedef struct g3d_generate_result {
     int video_written;                /* video.mp4 exists */
     const char *video_note;           /* why no video was written when one was asked for (static), or NULL */
     int viewer_written;               /* viewer.html exists (the viewer template is installed) */
+    double explore_distance;          /* d of the exploration set, metres (0 when not measured) */
+    double explore_empty[G3D_EXPLORE_CAMERAS];  /* empty-pixel fraction per exploration camera */
+    double explore_mean_empty, explore_max_empty;  /* their mean and largest */
     g3d_gaussians scene;              /* the trained Gaussians (empty when the run stopped earlier) */
 } g3d_generate_result;
 

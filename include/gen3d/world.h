@@ -32,6 +32,8 @@ extern "C" {
 typedef struct g3d_world_params {
     int extra_views;             /* M: extra training views (10) */
     double extra_angle_deg;      /* their orbit angle about a pivot at the median depth (5) */
+    int hole_stride;             /* the inpainted holes of each step are lifted one point per
+                                    hole_stride x hole_stride block (g3d_cloud_lift_sparse); 1..16 (2) */
     g3d_cloud_render_params render;
     g3d_align_params align;
     g3d_progress progress;       /* stage "world": step per pose; stopping returns G3D_CANCELLED */

@@ -15,6 +15,7 @@
 #include "gen3d/viewer.h"
 
 #include <cjson/cJSON.h>
+#include <math.h>
 #include <omp.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -45,6 +46,8 @@ void g3d_generate_params_default(g3d_generate_params *p)
     p->video_trajectory = "swing";
     p->video_frames = 120;
     g3d_video_params_default(&p->video_params);
+    g3d_explore_params_default(&p->explore);
+    p->explore_views = 0;
     p->seed = 42;
 }
 
@@ -92,6 +95,12 @@ static g3d_status check_cancel(const run *r)
     return g3d_cancel_requested(&r->p->cancel) ? G3D_ERR(G3D_CANCELLED, "cancelled") : G3D_OK;
 }
 
+/* The run builds the exploration set: to measure the scene, or for generation steps. */
+static int uses_explore(const g3d_generate_params *p)
+{
+    return p->last_stage == G3D_STAGE_OUTPUTS || (p->explore_views && !p->world_dir && p->last_stage == G3D_STAGE_WORLD);
+}
+
 /* Everything that can be refused without work is refused before any: a mistyped path name
  * fails now, not after minutes of training. */
 static g3d_status check_params(const g3d_generate_params *p)
@@ -112,6 +121,13 @@ static g3d_status check_params(const g3d_generate_params *p)
         g3d_camera probe = {g3d_intrinsics_from_fov(60, 64, 48), g3d_mat4_identity()}, *cams = NULL;
         int n;
         G3D_TRY(g3d_render_flythrough(p->video_trajectory, NULL, NULL, &probe, 1.0, 2, &cams, &n));
+        free(cams);
+    }
+    if (uses_explore(p)) {
+        /* the distance's bound depends on the scene: checked again once the input is known */
+        double d = p->explore.distance;
+        g3d_camera probe = {g3d_intrinsics_from_fov(60, 64, 48), g3d_mat4_identity()}, *cams = NULL;
+        G3D_TRY(g3d_explore_cameras(&probe, d > 0 && isfinite(d) ? d : 1.0, &p->explore, &cams, NULL));
         free(cams);
     }
     if (!p->world_dir && p->last_stage != G3D_STAGE_INPUT && !g3d_trajectory_is_file(p->trajectory)) {
@@ -231,6 +247,25 @@ static g3d_status stage_layers(run *r)
 
 /* ---- world ----------------------------------------------------------------------------------- */
 
+/* Generation steps at the exploration set's cameras (all but the input's own), after the
+ * trajectory: a rotation reveals nothing behind the input's depth edges, and the set's
+ * steps and turns do, so their holes are inpainted and lifted like any step's. */
+static g3d_status append_explore_poses(const g3d_generate_params *p, const g3d_frame *f, g3d_mat4 **poses, int *n)
+{
+    g3d_camera origin = {f->cam.K, g3d_mat4_identity()}, *cams;
+    G3D_TRY(g3d_explore_cameras(&origin, g3d_depth_median(&f->depth), &p->explore, &cams, NULL));
+    g3d_mat4 *all = realloc(*poses, sizeof **poses * (size_t)(*n + G3D_EXPLORE_CAMERAS));
+    if (!all) {
+        free(cams);
+        return G3D_ERR(G3D_ERR_NOMEM, "generate: out of memory");
+    }
+    *poses = all;
+    for (int i = 0; i < G3D_EXPLORE_CAMERAS; i++)
+        if (g3d_mat4_max_abs_diff(cams[i].c2w, g3d_mat4_identity()) > 1e-12) all[(*n)++] = cams[i].c2w;
+    free(cams);
+    return G3D_OK;
+}
+
 /* The trajectory's poses: a camera file, or a preset scaled by the input's median depth;
  * then picked to steps + 1 poses when steps is given. */
 static g3d_status make_poses(const g3d_generate_params *p, const g3d_frame *f, g3d_mat4 **poses, int *n)
@@ -258,6 +293,7 @@ static g3d_status make_poses(const g3d_generate_params *p, const g3d_frame *f, g
             *n = p->steps + 1;
         }
     }
+    if (rc == G3D_OK && p->explore_views) rc = append_explore_poses(p, f, poses, n);
     if (rc != G3D_OK) {
         free(*poses);
         *poses = NULL;
@@ -339,6 +375,57 @@ static g3d_status stage_splats(run *r)
         g3d_log(G3D_LOG_INFO, "splats: %d views, %lld -> %lld Gaussians, PSNR %.2f dB", nviews, (long long)r->initial_gaussians,
                 (long long)r->scene.n, r->train.last_psnr);
     return rc;
+}
+
+/* ---- exploration ----------------------------------------------------------------------------- */
+
+/* The input camera and the scene's median depth that the exploration set is built around: the
+ * input's depth, else a saved world's first depth map, else (scale 0) to be measured on the
+ * trained scene. */
+static g3d_camera explore_origin(const run *r, double *scale)
+{
+    const g3d_world *w = &r->world;
+    *scale = 0;
+    if (r->input) {
+        *scale = g3d_depth_median(&r->input->depth);
+        return r->input->cam;
+    }
+    if (w->n_views && w->depth[0].data) *scale = g3d_depth_median(&w->depth[0]);
+    return w->n_views ? w->cams[0] : w->extra_cams[0];
+}
+
+/* The exploration set (*cams malloc'd), refused as soon as the scene's scale is known. */
+static g3d_status explore_set(const run *r, g3d_camera **cams, double *distance)
+{
+    double scale;
+    g3d_camera origin = explore_origin(r, &scale);
+    *cams = NULL;
+    if (!(scale > 0) && r->scene.n > 0) G3D_TRY(g3d_render_scene_scale(&r->scene, &origin, &scale));
+    if (!(scale > 0)) return G3D_OK;
+    return g3d_explore_cameras(&origin, scale, &r->p->explore, cams, distance);
+}
+
+/* Columns of the contact sheet (three rows of nine for the exploration set), and the longer
+ * side of its thumbnails in pixels. */
+#define SHEET_COLUMNS 9
+#define SHEET_THUMB 128
+
+/* Coverage of the exploration set: the figures into res, the contact sheet into *sheet (when
+ * non-NULL) and the cameras into *cams (malloc'd). */
+static g3d_status measure_exploration(const run *r, g3d_generate_result *res, g3d_image *sheet, g3d_camera **cams)
+{
+    G3D_TRY(explore_set(r, cams, &res->explore_distance));
+    if (!*cams) return G3D_ERR(G3D_ERR_ARG, "generate: the scene has no depth in front of the input camera to scale the exploration set");
+    G3D_TRY(g3d_explore_coverage(&r->scene, *cams, G3D_EXPLORE_CAMERAS, res->explore_empty, sheet, SHEET_COLUMNS,
+                                 SHEET_THUMB));
+    res->explore_mean_empty = res->explore_max_empty = 0;
+    for (int i = 0; i < G3D_EXPLORE_CAMERAS; i++) {
+        res->explore_mean_empty += res->explore_empty[i] / G3D_EXPLORE_CAMERAS;
+        if (res->explore_empty[i] > res->explore_max_empty) res->explore_max_empty = res->explore_empty[i];
+    }
+    g3d_log(G3D_LOG_INFO, "exploration: %d cameras within %.2f m, empty pixels %.3f %% mean, %.3f %% worst",
+            G3D_EXPLORE_CAMERAS, res->explore_distance, 100 * res->explore_mean_empty, 100 * res->explore_max_empty);
+    return G3D_OK;
 }
 
 /* ---- outputs --------------------------------------------------------------------------------- */
@@ -456,6 +543,9 @@ static cJSON *config_json(const run *r)
             if (view) cJSON_AddStringToObject(c, "view_prompt", view);
         }
     }
+    if (!p->world_dir) cJSON_AddBoolToObject(c, "explore_views", p->explore_views);
+    cJSON_AddNumberToObject(c, "explore_distance", p->explore.distance);
+    cJSON_AddNumberToObject(c, "explore_angle", p->explore.angle_deg);
     cJSON_AddNumberToObject(c, "iterations", (double)p->train.iterations);
     cJSON_AddNumberToObject(c, "sh_degree", p->sh_degree);
     cJSON_AddStringToObject(c, "video_trajectory", p->video_trajectory);
@@ -480,6 +570,14 @@ static cJSON *summary_json(const g3d_generate_result *res)
     cJSON_AddBoolToObject(s, "video", res->video_written);
     if (res->video_note) cJSON_AddStringToObject(s, "video_note", res->video_note);
     cJSON_AddBoolToObject(s, "viewer", res->viewer_written);
+    if (res->explore_distance > 0) {
+        cJSON *e = cJSON_AddObjectToObject(s, "exploration");
+        cJSON_AddNumberToObject(e, "cameras", G3D_EXPLORE_CAMERAS);
+        cJSON_AddNumberToObject(e, "distance_m", res->explore_distance);
+        cJSON_AddNumberToObject(e, "mean_empty_fraction", res->explore_mean_empty);
+        cJSON_AddNumberToObject(e, "max_empty_fraction", res->explore_max_empty);
+        cJSON_AddItemToObject(e, "empty_fraction", cJSON_CreateDoubleArray(res->explore_empty, G3D_EXPLORE_CAMERAS));
+    }
     char key[64];
     for (int st = 0; st < G3D_STAGE_COUNT; st++) {
         snprintf(key, sizeof key, "seconds_%s", g3d_stage_name((g3d_stage)st));
@@ -508,13 +606,34 @@ static void collect(const run *r, g3d_generate_result *res)
     res->viewer_written = r->viewer_written;
 }
 
+/* The exploration cameras (a camera file for `gen3d render --coverage`) and the contact sheet. */
+static g3d_status write_exploration(run *r, const g3d_camera *cams, const g3d_image *sheet)
+{
+    g3d_camera_list l;
+    G3D_TRY(g3d_camera_list_create(&l, G3D_EXPLORE_CAMERAS));
+    memcpy(l.cams, cams, sizeof *cams * G3D_EXPLORE_CAMERAS);
+    g3d_status rc;
+    WRITE("exploration_cameras.json", g3d_cameras_json_write(path, &l));
+    g3d_camera_list_free(&l);
+    if (rc == G3D_OK) WRITE("exploration.png", g3d_image_save_png(path, sheet, 8));
+    return rc;
+}
+
 static g3d_status stage_outputs(run *r, g3d_generate_result *res, double t_start)
 {
     const g3d_generate_params *p = r->p;
-    if (!r->tmp) return G3D_OK;
     double t0 = g3d_time_now();
-    g3d_status rc;
-    WRITE("dataset", g3d_world_save(&r->world, path, p->seed));
+    g3d_image sheet = {0};
+    g3d_camera *explore = NULL;
+    g3d_status rc = measure_exploration(r, res, r->tmp ? &sheet : NULL, &explore);
+    if (rc != G3D_OK || !r->tmp) {
+        free(explore);
+        return rc;
+    }
+    rc = write_exploration(r, explore, &sheet);
+    free(explore);
+    g3d_image_free(&sheet);
+    if (rc == G3D_OK) WRITE("dataset", g3d_world_save(&r->world, path, p->seed));
     if (rc == G3D_OK) rc = write_cameras(r);
     if (rc == G3D_OK) WRITE("scene.ply", g3d_ply_write_gaussians(path, &r->scene));
     if (rc == G3D_OK) WRITE("scene.spz", g3d_spz_save(path, &r->scene));
@@ -583,6 +702,13 @@ g3d_status g3d_generate(const g3d_generate_params *p, g3d_generate_result *res_o
         }
         res.seconds[st] = g3d_time_now() - t;
         if (rc == G3D_OK) rc = check_cancel(&r);
+        /* a distance too long for this scene is refused before the work, not after it */
+        if (rc == G3D_OK && st == (p->world_dir ? G3D_STAGE_WORLD : G3D_STAGE_INPUT) && uses_explore(p)) {
+            g3d_camera *cams;
+            double d;
+            rc = explore_set(&r, &cams, &d);
+            free(cams);
+        }
     }
     if (rc == G3D_OK && r.tmp) rc = g3d_atomic_dir_commit(r.tmp, p->output_dir);
     res.seconds_total = g3d_time_now() - t_start;

@@ -22,6 +22,10 @@ static const char *description(void)
                      "  cameras.json, transforms.json  the training cameras (images under dataset/)\n"
                      "  points.ply       the aggregated coloured point cloud the Gaussians started from\n"
                      "  config.json      every setting and the seed; summary.json: timings and figures\n"
+                     "  exploration.png  the scene from 27 cameras a visitor reaches around the input view\n"
+                     "                   (sideways, up/down and forward steps, turns), empty pixels in magenta;\n"
+                     "                   their cameras in exploration_cameras.json, the empty fractions in\n"
+                     "                   summary.json\n"
                      "  dataset/         the world-generation folder (views, depth, masks, points.ply, log)\n"
                      "A summary (timings per stage, Gaussian count, training PSNR) goes to stdout.\n"
                      "--world DIR trains on a world folder written earlier (by `gen3d world`, or a dataset/)\n"
@@ -67,6 +71,8 @@ static int run(int argc, char **argv)
            (long long)r.initial_gaussians, (long long)r.gaussians, r.train_psnr);
     printf("  outputs   %6.1f s  %s\n", s[G3D_STAGE_OUTPUTS],
            !p.video ? "preview" : r.video_written ? "preview, video.mp4" : "preview, PNG frames (no video)");
+    printf("  explore             %d cameras within %.2f m: %.3f %% empty pixels on average, %.3f %% at worst\n",
+           G3D_EXPLORE_CAMERAS, r.explore_distance, 100 * r.explore_mean_empty, 100 * r.explore_max_empty);
     printf("  total     %6.1f s\n", r.seconds_total);
     g3d_generate_result_free(&r);
     return G3D_EXIT_OK;

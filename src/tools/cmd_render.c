@@ -1,5 +1,6 @@
 /* gen3d render: a Gaussian scene rendered along a camera path to frames, depth and a video. */
 #include "cli.h"
+#include "gen3d/explore.h"
 #include "gen3d/trajectory.h"
 #include "gen3d/render.h"
 #include "gen3d/worldscore.h"
@@ -25,9 +26,15 @@ static const char *description(void)
         "                        all frames; otherwise a warning says why and only frames are written)\n"
         "  depth/00000.png ...   with --depth: 16-bit depth in millimetres, 0 where nothing was hit\n"
         "  cameras.json          the cameras of the frames (OpenCV axes, camera-to-world)\n"
+        "--coverage measures instead of writing: for each camera, the fraction of empty pixels\n"
+        "(accumulated opacity below 0.5, where the scene shows the background) goes to stdout,\n"
+        "then their mean and the worst; nothing is written.\n"
         "Presets:\n"
-        "  %-12s a closed loop sliding sideways and pushing in while aiming at the scene's centre\n",
-        "swing");
+        "  %-12s a closed loop sliding sideways and pushing in while aiming at the scene's centre\n"
+        "  %-12s the exploration set: 27 cameras stepping sideways (+-d), up and down (+-d/2) and\n"
+        "               forward (0..2d), turned by up to --explore-angle in yaw and pitch (d: --distance,\n"
+        "               0: a quarter of the scene scale)\n",
+        "swing", "explore");
     for (const char *const *n = g3d_trajectory_names(); *n && k > 0 && k < (int)sizeof g_description; n++)
         k += snprintf(g_description + k, sizeof g_description - (size_t)k, "  %-12s %s\n", *n,
                       g3d_trajectory_describe(*n));
@@ -63,8 +70,10 @@ static int run(int argc, char **argv)
     g3d_cli_common_init(&common);
     common.output = "render";
     const char *scene = NULL, *trajectory = "swing", *background = "0,0,0";
-    int width = 512, height = 384, fps = 30, crf = 18, frames = 0, depth = 0, no_video = 0, sh_degree = -1;
+    int width = 512, height = 384, fps = 30, crf = 18, frames = 0, depth = 0, no_video = 0, sh_degree = -1, coverage = 0;
     double fov = 60.0, scale = 0.0, ws_speed = 0.0;
+    g3d_explore_params ep;
+    g3d_explore_params_default(&ep);
     g3d_trajectory_params tp;
     g3d_trajectory_params_default(&tp);
     g3d_opt opts[] = {
@@ -84,6 +93,8 @@ static int run(int argc, char **argv)
         {0, "background", G3D_OPT_STRING, &background, "R,G,B", "background colour, components in [0, 1]"},
         {0, "depth", G3D_OPT_FLAG, &depth, NULL, "also write 16-bit depth frames (millimetres)"},
         {0, "no-video", G3D_OPT_FLAG, &no_video, NULL, "write PNG frames only"},
+        {0, "explore-angle", G3D_OPT_DOUBLE, &ep.angle_deg, "DEG", "explore: yaw and pitch reach, degrees (0..90)"},
+        {0, "coverage", G3D_OPT_FLAG, &coverage, NULL, "print each camera's empty-pixel fraction instead of writing frames"},
         G3D_COMMON_OPTS(&common),
     };
     const char *pos[1];
@@ -106,8 +117,11 @@ static int run(int argc, char **argv)
     if (sh_degree < -1 || sh_degree > G3D_SH_MAX_DEGREE) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sh-degree must be in -1..3");
     if (!parse_rgb(background, bg))
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--background must be R,G,B with components in [0, 1], got '%s'", background);
-    const int worldscore = !strncmp(trajectory, "worldscore:", 11);
+    if (!(ep.angle_deg >= 0 && ep.angle_deg < 90))
+        return g3d_cli_errorf(G3D_EXIT_USAGE, "--explore-angle must be at least 0 and below 90 degrees");
+    const int worldscore = !strncmp(trajectory, "worldscore:", 11), explore = !strcmp(trajectory, "explore");
     const int from_file = !worldscore && g3d_trajectory_is_file(trajectory);
+    if (explore && frames > 0) return g3d_cli_errorf(G3D_EXIT_USAGE, "--frames does not apply to the exploration set");
     if (from_file && frames > 0)
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--frames resamples presets; a trajectory file is rendered as given");
     if (worldscore && (frames > 0 || width != 512 || height != 384 || fov != 60.0))
@@ -130,12 +144,38 @@ static int run(int argc, char **argv)
             if (!(tp.distance > 0) && !(scale > 0)) rc = g3d_render_scene_scale(&g, &input, &scale);
             ws_speed = tp.distance > 0 ? tp.distance : 0.25 * scale;
             if (rc == G3D_OK) rc = g3d_worldscore_path(trajectory + 11, ws_speed, &cams, &n);
+        } else if (explore) {
+            g3d_camera input = {g3d_intrinsics_from_fov(fov, width, height), g3d_mat4_identity()};
+            if (!(scale > 0)) rc = g3d_render_scene_scale(&g, &input, &scale);
+            ep.distance = tp.distance;
+            if (rc == G3D_OK) rc = g3d_explore_cameras(&input, scale, &ep, &cams, NULL);
+            n = G3D_EXPLORE_CAMERAS;
         } else {
             g3d_camera input;
             input.K = g3d_intrinsics_from_fov(fov, width, height);
             input.c2w = g3d_mat4_identity();
             rc = g3d_render_flythrough(trajectory, &tp, &g, &input, scale, frames, &cams, &n);
         }
+    }
+    if (coverage) {
+        double *empty = rc == G3D_OK ? g3d_calloc((size_t)n, sizeof *empty, "coverage") : NULL;
+        if (rc == G3D_OK && !empty) rc = G3D_ERR_NOMEM;
+        if (rc == G3D_OK) rc = g3d_explore_coverage(&g, cams, n, empty, NULL, 0, 0);
+        free(cams);
+        g3d_gaussians_free(&g);
+        if (rc != G3D_OK) {
+            free(empty);
+            return g3d_cli_fail(rc);
+        }
+        double mean = 0, worst = 0;
+        for (int i = 0; i < n; i++) {
+            printf("camera %d: %.4f %% empty\n", i, 100 * empty[i]);
+            mean += empty[i] / n;
+            worst = empty[i] > worst ? empty[i] : worst;
+        }
+        printf("mean %.4f %% empty, worst %.4f %%, over %d cameras\n", 100 * mean, 100 * worst, n);
+        free(empty);
+        return G3D_EXIT_OK;
     }
     if (rc == G3D_OK) rc = g3d_atomic_dir_begin(common.output, &tmp);
     g3d_render_params p;

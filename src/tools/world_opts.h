@@ -9,8 +9,8 @@
 typedef struct g3d_cli_world {
     const char *trajectory;
     const char *inpainter, *lama_model, *seg_model;
-    int steps, extra, max_side, no_layers;
-    double angle, distance;
+    int steps, extra, max_side, no_layers, explore_views;
+    double angle, distance, explore_distance, explore_angle;
 } g3d_cli_world;
 
 #define G3D_WORLD_OPTS(w)                                                                                         \
@@ -23,7 +23,10 @@ typedef struct g3d_cli_world {
     {0, "no-layers", G3D_OPT_FLAG, &(w)->no_layers, NULL, "skip the foreground/background split"},            \
     {0, "inpainter", G3D_OPT_STRING, &(w)->inpainter, "NAME", "classic (PatchMatch) or lama (needs --lama-model)"},  \
     {0, "lama-model", G3D_OPT_PATH, &(w)->lama_model, "CKPT", "LaMa checkpoint (big-lama/models/best.ckpt)"},       \
-    {0, "seg-model", G3D_OPT_PATH, &(w)->seg_model, "CKPT", "Segment Anything checkpoint: the layers' masks (sam_vit_*.pth)"}
+    {0, "seg-model", G3D_OPT_PATH, &(w)->seg_model, "CKPT", "Segment Anything checkpoint: the layers' masks (sam_vit_*.pth)"}, \
+    {0, "explore-views", G3D_OPT_FLAG, &(w)->explore_views, NULL, "generation steps at the exploration cameras too (fewer holes off the path)"}, \
+    {0, "explore-distance", G3D_OPT_DOUBLE, &(w)->explore_distance, "M", "exploration set: step d in metres (0: a quarter of the median depth)"}, \
+    {0, "explore-angle", G3D_OPT_DOUBLE, &(w)->explore_angle, "DEG", "exploration set: yaw and pitch reach in degrees, below 90"}
 
 /* The library's defaults (g3d_generate_params_default). */
 void g3d_cli_world_init(g3d_cli_world *w);

@@ -61,27 +61,54 @@ static g3d_vec3 pixel_span(const g3d_camera *cam, const g3d_image *depth, int x,
     return g3d_v3_sub(g3d_camera_unproject(cam, x + dx, y + dy, z), p);
 }
 
+/* 1 when pixel i is lifted: it has depth and, with a mask, is in it. */
+static int liftable(const g3d_image *depth, const g3d_image *mask, size_t i)
+{
+    return depth->data[i] > 0 && (!mask || mask->data[i] > 0.5f);
+}
+
+/* The step (1 or `stride`) pixel (x, y) is lifted with, 0 when it is not lifted: the first
+ * pixel of each stride x stride block stands for the block; the others are lifted on their
+ * own only when it is not, so that narrow regions keep every pixel. */
+static int lift_step(const g3d_image *depth, const g3d_image *mask, int x, int y, int stride)
+{
+    int w = depth->w;
+    if (!liftable(depth, mask, (size_t)y * w + x)) return 0;
+    if (stride == 1) return 1;
+    int bx = x - x % stride, by = y - y % stride;
+    if (bx == x && by == y) return stride;
+    return liftable(depth, mask, (size_t)by * w + bx) ? 0 : 1;
+}
+
 g3d_status g3d_cloud_lift(g3d_cloud *c, const g3d_image *rgb, const g3d_image *depth, const g3d_camera *cam,
                           const g3d_image *lift_mask, int32_t view, int64_t *added)
+{
+    return g3d_cloud_lift_sparse(c, rgb, depth, cam, lift_mask, view, 1, added);
+}
+
+g3d_status g3d_cloud_lift_sparse(g3d_cloud *c, const g3d_image *rgb, const g3d_image *depth, const g3d_camera *cam,
+                                 const g3d_image *lift_mask, int32_t view, int stride, int64_t *added)
 {
     int w = cam->K.width, h = cam->K.height;
     if (rgb->w != w || rgb->h != h || rgb->c != 3 || depth->w != w || depth->h != h || depth->c != 1 ||
         (lift_mask && (lift_mask->w != w || lift_mask->h != h)))
         return G3D_ERR(G3D_ERR_MISMATCH, "lift: image %dx%d / depth %dx%d do not match the %dx%d camera", rgb->w, rgb->h,
                        depth->w, depth->h, w, h);
+    if (stride < 1 || stride > 16) return G3D_ERR(G3D_ERR_ARG, "lift: stride %d is not in 1..16", stride);
     int64_t n = 0;
-    for (size_t i = 0; i < (size_t)w * h; i++)
-        n += depth->data[i] > 0 && (!lift_mask || lift_mask->data[i] > 0.5f);
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) n += lift_step(depth, lift_mask, x, y, stride) > 0;
     G3D_TRY(g3d_cloud_reserve(c, c->n + n));
     double inv_f = 2.0 / (cam->K.fx + cam->K.fy);
     int64_t k = c->n;
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
+            int step = lift_step(depth, lift_mask, x, y, stride);
+            if (!step) continue;
             size_t i = (size_t)y * w + x;
             float z = depth->data[i];
-            if (!(z > 0) || (lift_mask && !(lift_mask->data[i] > 0.5f))) continue;
             g3d_vec3 p = g3d_camera_unproject(cam, x, y, z);
-            g3d_vec3 sx = pixel_span(cam, depth, x, y, 1, 0, p), sy = pixel_span(cam, depth, x, y, 0, 1, p);
+            g3d_vec3 sx = pixel_span(cam, depth, x, y, step, 0, p), sy = pixel_span(cam, depth, x, y, 0, step, p);
             float *sp = c->span + 6 * k;
             sp[0] = (float)sx.x; sp[1] = (float)sx.y; sp[2] = (float)sx.z;
             sp[3] = (float)sy.x; sp[4] = (float)sy.y; sp[5] = (float)sy.z;
@@ -89,7 +116,7 @@ g3d_status g3d_cloud_lift(g3d_cloud *c, const g3d_image *rgb, const g3d_image *d
             c->xyz[3 * k + 1] = (float)p.y;
             c->xyz[3 * k + 2] = (float)p.z;
             memcpy(c->rgb + 3 * k, rgb->data + 3 * i, 3 * sizeof(float));
-            c->size[k] = (float)(z * inv_f);
+            c->size[k] = (float)(z * inv_f * step);
             c->view[k] = view;
             k++;
         }

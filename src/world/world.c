@@ -18,6 +18,7 @@ void g3d_world_params_default(g3d_world_params *p)
     memset(p, 0, sizeof *p);
     p->extra_views = 10;
     p->extra_angle_deg = 5.0;
+    p->hole_stride = 2;
     g3d_cloud_render_params_default(&p->render);
     g3d_align_params_default(&p->align);
 }
@@ -52,10 +53,43 @@ double g3d_depth_median(const g3d_image *depth)
     return m;
 }
 
-/* Step 0: the input, and with layers the background hidden behind its foreground. */
-static g3d_status lift_input(g3d_world *w, const g3d_frame *in, const g3d_layers *layers)
+/* The input's depth with its gaps (a stereo matcher's occlusions, a sensor's dropouts) filled
+ * as a new view's holes are: estimated, then aligned to the known depth around them. Left
+ * unlifted, those pixels would be holes in the world from every camera, the input's too. */
+static g3d_status complete_input_depth(const g3d_frame *in, const g3d_depth_estimator *depth, const g3d_world_params *p,
+                                       g3d_image *out)
 {
-    G3D_TRY(g3d_cloud_lift(&w->cloud, &in->rgb, &in->depth, &w->cams[0], NULL, 0, &w->steps[0].points_added));
+    g3d_image holes = {0}, valid = {0}, est = {0};
+    size_t n = g3d_image_size(&in->depth), nh = 0;
+    G3D_TRY(g3d_image_clone(out, &in->depth));
+    for (size_t k = 0; k < n; k++) nh += !(in->depth.data[k] > 0);
+    if (!nh || nh == n) return G3D_OK;
+    g3d_status rc = g3d_image_create(&holes, in->depth.w, in->depth.h, 1);
+    if (rc == G3D_OK) rc = g3d_image_create(&valid, in->depth.w, in->depth.h, 1);
+    for (size_t k = 0; rc == G3D_OK && k < n; k++) {
+        holes.data[k] = !(in->depth.data[k] > 0);
+        valid.data[k] = 1.0f - holes.data[k];
+    }
+    g3d_intrinsics K = in->cam.K;
+    if (rc == G3D_OK) rc = depth->estimate(depth->ctx, &in->rgb, &in->depth, &holes, &est, &K);
+    if (rc == G3D_OK) rc = g3d_align_depth(&est, &in->depth, &valid, &p->align, NULL);
+    for (size_t k = 0; rc == G3D_OK && k < n; k++)
+        if (holes.data[k] > 0.5f) out->data[k] = est.data[k];
+    g3d_image_free(&holes);
+    g3d_image_free(&valid);
+    g3d_image_free(&est);
+    return rc;
+}
+
+/* Step 0: the input, and with layers the background hidden behind its foreground. */
+static g3d_status lift_input(g3d_world *w, const g3d_frame *in, const g3d_depth_estimator *depth, const g3d_layers *layers,
+                             const g3d_world_params *p)
+{
+    g3d_image full = {0};
+    g3d_status rc = complete_input_depth(in, depth, p, &full);
+    if (rc == G3D_OK) rc = g3d_cloud_lift(&w->cloud, &in->rgb, &full, &w->cams[0], NULL, 0, &w->steps[0].points_added);
+    g3d_image_free(&full);
+    G3D_TRY(rc);
     if (layers) {
         G3D_TRY(g3d_layers_clone(&w->layers, layers));
         if (w->layers.n_foreground) {
@@ -103,7 +137,7 @@ static g3d_status world_step(g3d_world *w, int i, const g3d_inpainter *inpaint, 
     /* The view keeps the cloud's depth where the cloud covered it: only the holes are new. */
     for (size_t k = 0; k < n; k++) if (mask.data[k] >= 0.5f) est.data[k] = cloud_d.data[k];
     t = g3d_time_now();
-    if (nh) rc = g3d_cloud_lift(&w->cloud, &rgb, &est, cam, &holes, i, &st->points_added);
+    if (nh) rc = g3d_cloud_lift_sparse(&w->cloud, &rgb, &est, cam, &holes, i, p->hole_stride, &st->points_added);
     st->seconds_lift = g3d_time_now() - t;
     if (rc != G3D_OK) goto done;
     w->rgb[i] = rgb;
@@ -127,6 +161,7 @@ g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int
     if (!p) p = &def;
     memset(out, 0, sizeof *out);
     if (n_poses < 1 || n_poses > 10000) return G3D_ERR(G3D_ERR_ARG, "world: %d poses (need 1..10000)", n_poses);
+    if (p->hole_stride < 1 || p->hole_stride > 16) return G3D_ERR(G3D_ERR_ARG, "world: hole stride %d (need 1..16)", p->hole_stride);
     if (p->extra_views < 0 || p->extra_views > 10000) return G3D_ERR(G3D_ERR_ARG, "world: %d extra views (need 0..10000)", p->extra_views);
     G3D_TRY(g3d_frame_validate(input, input->name[0] ? input->name : "input"));
     g3d_status rc = g3d_cloud_init(&out->cloud);
@@ -140,7 +175,7 @@ g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int
         out->cams[i].K = input->cam.K;
         out->cams[i].c2w = g3d_mat4_mul(input->cam.c2w, poses[i]);
     }
-    if (rc == G3D_OK) rc = lift_input(out, input, layers);
+    if (rc == G3D_OK) rc = lift_input(out, input, depth, layers, p);
     if (rc == G3D_OK && g3d_progress_report(&p->progress, "world", 1, n_poses, NULL))
         rc = G3D_ERR(G3D_CANCELLED, "world generation cancelled");
     for (int i = 1; i < n_poses && rc == G3D_OK; i++) {
