@@ -21,6 +21,7 @@ void g3d_train_params_default(g3d_train_params *p, int64_t iterations)
     p->lambda_ssim = G3D_LOSS_LAMBDA_SSIM;
     p->sh_degree_interval = 1000;
     p->densify = 1;
+    p->visible_adam = 1;
     p->report_every = 50;
     g3d_adam_params_default(&p->adam);
     p->adam.means_lr_steps = iterations;
@@ -331,7 +332,7 @@ g3d_status g3d_train(g3d_gaussians *g, const g3d_train_view *views, int nviews,
         if ((rc = g3d_raster_bwd(ws, g, drgb, NULL, NULL, &grads, grad2d)) != G3D_OK) break;
         const int dens_on = p->densify && it < p->dens.until;
         if (dens_on) g3d_densify_accumulate(&s.st, grad2d, radii, g->n);
-        if ((rc = g3d_adam_step(&s.adam, g, &grads, extent)) != G3D_OK) break;
+        if ((rc = g3d_adam_step_visible(&s.adam, g, &grads, extent, p->visible_adam ? radii : NULL)) != G3D_OK) break;
         if (dens_on) {
             if (it > p->dens.from && it % p->dens.interval == 0) {
                 int large = p->dens.opacity_reset_interval > 0 && it > p->dens.opacity_reset_interval;
