@@ -717,9 +717,15 @@ g3d_status g3d_raster_bwd(g3d_raster_ws *ws, const g3d_gaussians *g, const float
     for (int64_t i = 0; i < n; i++) {
         if (ws->radii[i] <= 0) continue;
         double r[REC] = {0};
+        int any = 0;
         for (int64_t k = ws->offs[i]; k < ws->offs[i + 1]; k++)
-            for (int c = 0; c < REC; c++) r[c] += ws->rec[(size_t)k * REC + c];
-        project_bwd(ws, g, i, r, grads, grad2d);
+            for (int c = 0; c < REC; c++) {
+                r[c] += ws->rec[(size_t)k * REC + c];
+                any |= ws->rec[(size_t)k * REC + c] != 0.0f;
+            }
+        /* hidden everywhere (behind saturated pixels, or outside every pixel's list): every
+         * gradient term would be a zero */
+        if (any) project_bwd(ws, g, i, r, grads, grad2d);
     }
     return G3D_OK;
 }
