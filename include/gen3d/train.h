@@ -33,6 +33,9 @@ typedef struct g3d_train_params {
     float bg[3];                /* background colour behind the splats; black */
     int densify;                /* 1 = adaptive density control on */
     int visible_adam;           /* 1 = Adam steps only the Gaussians the view sees (adam.h); 1 */
+    int64_t coarse_until;       /* iterations 1..coarse_until see every view downscaled by
+                                   coarse_factor (area filter; coarse to fine); 0 = off */
+    int coarse_factor;          /* 2 */
     int64_t report_every;       /* progress callback period in iterations; 50 */
     g3d_adam_params adam;       /* defaults with means_lr_steps = iterations */
     g3d_densify_params dens;    /* g3d_densify_params_default(iterations) */
