@@ -426,8 +426,10 @@ _Static_assert(TILE == 2 * HALF, "the row loops are built for 16-pixel tiles");
 /* The first lane of the half row that holds lanes lx0..lx1 (lx1 - lx0 < HALF). */
 static inline int half_offset(int lx0) { return lx0 < TILE - HALF ? lx0 : TILE - HALF; }
 
-/* Pixel box of Gaussian gi inside tile (tx, ty), tile-local inclusive bounds. */
-static void local_box(const g3d_raster_ws *ws, int32_t gi, int tx, int ty, int *x0, int *x1, int *y0, int *y1)
+/* Pixel box of Gaussian gi inside tile (tx, ty), tile-local inclusive bounds. Inlined into the
+ * instruction-set builds of the blends: the baseline build has no rounding instruction and
+ * calls libm for ceilf / floorf, which cost as much as a small Gaussian's rows. */
+VINLINE void local_box(const g3d_raster_ws *ws, int32_t gi, int tx, int ty, int *x0, int *x1, int *y0, int *y1)
 {
     const float *q = ws->pk + (size_t)PK * gi;
     const float mx = q[PK_MX] - (float)(tx * TILE), my = q[PK_MY] - (float)(ty * TILE);

@@ -22,7 +22,7 @@ void g3d_train_params_default(g3d_train_params *p, int64_t iterations)
     p->lambda_ssim = G3D_LOSS_LAMBDA_SSIM;
     p->sh_degree_interval = 1000;
     p->densify = 1;
-    p->visible_adam = 1;
+    p->visible_adam = 0;
     p->coarse_factor = 2;
     p->report_every = 50;
     g3d_adam_params_default(&p->adam);
