@@ -50,6 +50,17 @@ static void render(const g3d_gaussians *g, const g3d_camera *c, g3d_image *img)
     g3d_raster_ws_free(ws);
 }
 
+/* The training views: the ring of cameras around the ground-truth scene, rendered. */
+static void ring_views(const g3d_gaussians *gt, g3d_image imgs[NTRAIN], g3d_train_view views[NTRAIN])
+{
+    for (int i = 0; i < NTRAIN; i++) {
+        views[i].cam = ring_camera(2 * M_PI * i / NTRAIN, (i % 3 - 1) * 1.0);
+        render(gt, &views[i].cam, &imgs[i]);
+        views[i].image = &imgs[i];
+        views[i].mask = NULL;
+    }
+}
+
 static void init_model(const g3d_gaussians *gt, g3d_gaussians *g)
 {
     g3d_rng r;
@@ -68,12 +79,7 @@ TEST(fits_and_is_deterministic)
     gt_scene(&gt);
     g3d_image imgs[NTRAIN];
     g3d_train_view views[NTRAIN];
-    for (int i = 0; i < NTRAIN; i++) {
-        views[i].cam = ring_camera(2 * M_PI * i / NTRAIN, (i % 3 - 1) * 1.0);
-        render(&gt, &views[i].cam, &imgs[i]);
-        views[i].image = &imgs[i];
-        views[i].mask = NULL;
-    }
+    ring_views(&gt, imgs, views);
     init_model(&gt, &g);
     init_model(&gt, &g2);
     g3d_train_params p;
@@ -174,12 +180,7 @@ TEST(coarse_to_fine)
     gt_scene(&gt);
     g3d_image imgs[NTRAIN];
     g3d_train_view views[NTRAIN];
-    for (int i = 0; i < NTRAIN; i++) {
-        views[i].cam = ring_camera(2 * M_PI * i / NTRAIN, (i % 3 - 1) * 1.0);
-        render(&gt, &views[i].cam, &imgs[i]);
-        views[i].image = &imgs[i];
-        views[i].mask = NULL;
-    }
+    ring_views(&gt, imgs, views);
     init_model(&gt, &a);
     init_model(&gt, &fine);
     g3d_train_params p;
