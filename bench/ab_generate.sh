@@ -54,9 +54,9 @@ run() {
     shift 2
     rm -rf "$out" "$out.eval"
     /usr/bin/time -f "%e %U %S %M" -o "$out.time" "$bin/gen3d" generate --default-input "$input" "$@" -q -o "$out" \
-        >"$out.log" 2>&1
+        >"$out.log" 2>&1 || { echo "ab_generate: $bin/gen3d generate failed: see $out.log" >&2; exit 1; }
     "$bin/gen3d" eval --scene "$out/scene.ply" --views "$input" --max-side "$eval_side" -q -o "$out.eval" \
-        >"$out.eval.log" 2>&1
+        >"$out.eval.log" 2>&1 || { echo "ab_generate: $bin/gen3d eval failed: see $out.eval.log" >&2; exit 1; }
     python3 - "$out" <<'EOF'
 import json, sys
 out = sys.argv[1]
@@ -73,7 +73,7 @@ printf "%-4s %5s %9s %9s %8s %10s %8s\n" run round wall_s cpu_s peak_mb gaussian
 i=1
 while [ "$i" -le "$rounds" ]; do
     for v in old new; do
-        r=$(run "$work/$v" "$work/$v-run$i" "$@")
+        r=$(run "$work/$v" "$work/$v-run$i" "$@") || exit 1
         echo "$v $r" >>"$work/results"
         echo "$v $i $r" | awk '{printf "%-4s %5d %9.1f %9.1f %8.0f %10d %8.2f\n", $1, $2, $3, $4, $5, $6, $7}'
     done
