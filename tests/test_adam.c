@@ -83,9 +83,67 @@ TEST(means_schedule)
     CHECK_NEAR(g3d_adam_means_lr(&p, 9000, 2.0), 3.2e-6, 1e-14);
 }
 
+/* Only the visible Gaussians step, exactly as a full step would move them; the others keep
+ * their parameters and moments. */
+TEST(visible_only)
+{
+    const int N = 600;   /* more than one block of 256, with runs crossing block edges */
+    g3d_gaussians g = {0}, h = {0}, grad = {0};
+    CHECK_OK(g3d_gaussians_create(&g, N, 3));
+    CHECK_OK(g3d_gaussians_create(&h, N, 3));
+    CHECK_OK(g3d_gaussians_create(&grad, N, 3));
+    g.n = h.n = grad.n = N;
+    g3d_rng r;
+    g3d_rng_seed(&r, 7, 0);
+    const size_t per = 3 + 3 + 4 + 1 + 48;
+    for (int i = 0; i < N; i++)
+        for (size_t k = 0; k < per; k++) {
+            double lr;
+            g3d_adam_params p0;
+            g3d_adam_params_default(&p0);
+            *flat(&g, i, (int)k, &lr, &p0, 0) = *flat(&h, i, (int)k, &lr, &p0, 0) = g3d_rng_normal(&r);
+            *flat(&grad, i, (int)k, &lr, &p0, 0) = g3d_rng_normal(&r);
+        }
+    int32_t radii[600];
+    for (int i = 0; i < N; i++) radii[i] = (i / 7) % 3 == 0 ? 0 : 1 + i % 5;
+    g3d_adam_params p;
+    g3d_adam_params_default(&p);
+    g3d_adam a, b;
+    CHECK_OK(g3d_adam_init(&a, &p, &g));
+    CHECK_OK(g3d_adam_init(&b, &p, &h));
+    CHECK_OK(g3d_adam_step_visible(&a, &g, &grad, 3.0, radii));
+    CHECK_OK(g3d_adam_step(&b, &h, &grad, 3.0));
+    CHECK(a.step == 1 && b.step == 1);
+    /* visible: as the full step, parameters and moments; invisible: the starting value (the
+     * generator replayed) and zero moments */
+    int bad = 0;
+    g3d_rng_seed(&r, 7, 0);
+    for (int i = 0; i < N; i++)
+        for (size_t k = 0; k < per; k++) {
+            double lr;
+            float x0 = (float)g3d_rng_normal(&r);
+            (void)g3d_rng_normal(&r);
+            float x = *flat(&g, i, (int)k, &lr, &p, 0), m = *flat(&a.m, i, (int)k, &lr, &p, 0);
+            float v = *flat(&a.v, i, (int)k, &lr, &p, 0);
+            if (radii[i] > 0)
+                bad += x != *flat(&h, i, (int)k, &lr, &p, 0) || m != *flat(&b.m, i, (int)k, &lr, &p, 0) ||
+                       v != *flat(&b.v, i, (int)k, &lr, &p, 0) || x == x0;
+            else
+                bad += x != x0 || m != 0.0f || v != 0.0f;
+        }
+    printf("       %d of %d values differ from the expected ones\n", bad, (int)(N * per));
+    CHECK(bad == 0);
+    g3d_adam_free(&a);
+    g3d_adam_free(&b);
+    g3d_gaussians_free(&g);
+    g3d_gaussians_free(&h);
+    g3d_gaussians_free(&grad);
+}
+
 int main(void)
 {
     RUN(matches_reference);
+    RUN(visible_only);
     RUN(means_schedule);
     return test_summary();
 }

@@ -17,6 +17,7 @@ grep -q "train" "$T/out" && grep -q "PSNR" "$T/out" && grep -q "total" "$T/out" 
 if [ -f "$(dirname "$GEN3D")/gen3d-viewer.html" ]; then  # the viewer was built
     [ -s "$T/a/viewer.html" ] && grep -q '"viewer":[[:space:]]*true' "$T/a/summary.json" && ok "wrote viewer.html" || bad "wrote viewer.html"
 fi
+grep -Eq '"peak_memory_mb":[[:space:]]*[1-9][0-9]' "$T/a/summary.json" && ok "summary reports the peak memory" || bad "summary reports the peak memory"
 grep -q '"seed":' "$T/a/config.json" && grep -q '"iterations":' "$T/a/config.json" && ok "config records the settings" || bad "config records the settings"
 grep -q '"dataset/views/view_000.png"' "$T/a/transforms.json" && ok "cameras point into dataset/" || bad "cameras point into dataset/"
 # the exploration set: 27 cameras, their empty fractions in the summary, the same figures from render --coverage

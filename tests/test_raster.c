@@ -119,7 +119,7 @@ static g3d_camera test_camera(void)
 }
 
 /* A few Gaussians in front of a camera looking down +z, sizes of a few pixels. */
-static void random_scene(g3d_gaussians *g, int n, int deg, uint64_t seed)
+static void random_scene(g3d_gaussians *g, int n, int deg, uint64_t seed, double scale)
 {
     g3d_rng rng;
     g3d_rng_seed(&rng, seed, 1);
@@ -130,7 +130,7 @@ static void random_scene(g3d_gaussians *g, int n, int deg, uint64_t seed)
         g->means[3 * i] = (float)(g3d_rng_float(&rng) * 1.2 - 0.6);
         g->means[3 * i + 1] = (float)(g3d_rng_float(&rng) * 1.2 - 0.6);
         g->means[3 * i + 2] = (float)(2.5 + g3d_rng_float(&rng));
-        for (int k = 0; k < 3; k++) g->log_scales[3 * i + k] = (float)(log(0.25) + 0.5 * (g3d_rng_float(&rng) - 0.5));
+        for (int k = 0; k < 3; k++) g->log_scales[3 * i + k] = (float)(log(0.25 * scale) + 0.5 * (g3d_rng_float(&rng) - 0.5));
         for (int k = 0; k < 4; k++) g->rots[4 * i + k] = (float)(g3d_rng_float(&rng) * 2 - 1);
         g->opacity_logits[i] = (float)(g3d_rng_float(&rng) * 2 - 1.5);
         for (int k = 0; k < K * 3; k++) g->sh[i * K * 3 + k] = (float)((g3d_rng_float(&rng) - 0.5) * (k < 3 ? 1.0 : 0.4));
@@ -156,10 +156,10 @@ static void free_dmodel(dmodel *m) { free(m->means); free(m->ls); free(m->rots);
 /* Analytic gradients vs central differences (h = 1e-5, double). Per parameter type the error
  * must satisfy |ana - fd| <= 1e-3 * max(|fd|, 1e-2 * max_type |fd|): relative 1e-3, with an
  * absolute floor at 1e-5 of the type's largest gradient for entries near zero. */
-static void grad_check(int deg, int antialiased, uint64_t seed)
+static void grad_check(int deg, int antialiased, uint64_t seed, double scale)
 {
     g3d_gaussians g, gr;
-    random_scene(&g, 5, deg, seed);
+    random_scene(&g, 5, deg, seed, scale);
     CHECK_OK(g3d_gaussians_create(&gr, g.n, deg));
     g3d_camera cam = test_camera();
     g3d_raster_params s;
@@ -215,10 +215,12 @@ static void grad_check(int deg, int antialiased, uint64_t seed)
     free(rgb); free(al); free(dep); free(fwr); free(fwa); free(fwd); free(wr); free(wa); free(wd);
 }
 
-TEST(grad_deg0) { grad_check(0, 0, 1); }
-TEST(grad_deg1) { grad_check(1, 0, 2); }
-TEST(grad_deg3) { grad_check(3, 0, 3); }
-TEST(grad_deg2_antialiased) { grad_check(2, 1, 4); }
+TEST(grad_deg0) { grad_check(0, 0, 1, 1.0); }
+TEST(grad_deg1) { grad_check(1, 0, 2, 1.0); }
+TEST(grad_deg3) { grad_check(3, 0, 3, 1.0); }
+TEST(grad_deg2_antialiased) { grad_check(2, 1, 4, 1.0); }
+/* footprints under 8 pixels wide: the blend's half-row path */
+TEST(grad_small_footprints) { grad_check(3, 0, 5, 0.4); }
 
 /* One isotropic Gaussian on the optical axis renders o * exp(-r^2 / (2 (s^2 + eps2d))) with
  * s = f sigma / z pixels, wherever that alpha is at least 1/255. */
@@ -270,7 +272,7 @@ TEST(single_isotropic)
 TEST(alpha_and_culling)
 {
     g3d_gaussians g;
-    random_scene(&g, 5, 1, 7);
+    random_scene(&g, 5, 1, 7, 1.0);
     g3d_camera cam = test_camera();
     g3d_raster_params s;
     g3d_raster_params_default(&s);
@@ -422,5 +424,6 @@ int main(void)
     RUN(grad_deg1);
     RUN(grad_deg3);
     RUN(grad_deg2_antialiased);
+    RUN(grad_small_footprints);
     return test_summary();
 }

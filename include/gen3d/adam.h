@@ -65,6 +65,13 @@ double g3d_adam_means_lr(const g3d_adam_params *p, int64_t step, double extent);
 g3d_status g3d_adam_step(g3d_adam *a, g3d_gaussians *model, const g3d_gaussians *grad,
                          double extent);
 
+/* The same step on the visible Gaussians only (radii[i] > 0, the rasterizer's output for the
+ * view the gradient came from): the others keep their parameters and moments, as if that
+ * step had not happened for them ("visible Adam"). radii NULL = every Gaussian (g3d_adam_step).
+ * The step count still rises once. Computed in single precision. */
+g3d_status g3d_adam_step_visible(g3d_adam *a, g3d_gaussians *model, const g3d_gaussians *grad, double extent,
+                                 const int32_t *radii);
+
 #ifdef __cplusplus
 }
 #endif

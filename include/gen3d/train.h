@@ -32,6 +32,11 @@ typedef struct g3d_train_params {
     int64_t sh_degree_interval; /* the active SH degree rises every this many steps; 1000 */
     float bg[3];                /* background colour behind the splats; black */
     int densify;                /* 1 = adaptive density control on */
+    int visible_adam;           /* 1 = Adam steps only the Gaussians the view sees (adam.h); 0:
+                                   it saves little and cost 0.3 dB at the real held-out view */
+    int64_t coarse_until;       /* iterations 1..coarse_until see every view downscaled by
+                                   coarse_factor (area filter; coarse to fine); 0 = off */
+    int coarse_factor;          /* 2 */
     int64_t report_every;       /* progress callback period in iterations; 50 */
     g3d_adam_params adam;       /* defaults with means_lr_steps = iterations */
     g3d_densify_params dens;    /* g3d_densify_params_default(iterations) */

@@ -20,6 +20,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 
 static const char *const g_stage_names[G3D_STAGE_COUNT] = {"input", "layers", "world", "splats", "outputs"};
 
@@ -584,6 +585,8 @@ static cJSON *summary_json(const g3d_generate_result *res)
         cJSON_AddNumberToObject(s, key, res->seconds[st]);
     }
     cJSON_AddNumberToObject(s, "seconds_total", res->seconds_total);
+    struct rusage ru;   /* the whole process's peak resident memory so far (Linux: KiB) */
+    if (getrusage(RUSAGE_SELF, &ru) == 0) cJSON_AddNumberToObject(s, "peak_memory_mb", ru.ru_maxrss / 1024.0);
     return s;
 }
 

@@ -50,24 +50,64 @@ double g3d_adam_means_lr(const g3d_adam_params *p, int64_t step, double extent)
     return extent * exp((1 - s) * log(p->lr[G3D_PG_MEANS]) + s * log(p->means_lr_final));
 }
 
+/* The update runs in single precision: the moments are stored as floats anyway, and at
+ * 59 values per Gaussian the step is bound by memory traffic and, in double, by the vector
+ * square roots and divisions (twice the lanes in float). */
 typedef struct step_consts {
-    double b1, b2, c1, c2, eps;
+    float b1, b2, step_size, inv_sqrt_c2, eps;
 } step_consts;
 
-static inline void update(float *x, float *m, float *v, const float *g, size_t n, double lr,
-                          const step_consts *k)
+static inline void update(float *restrict x, float *restrict m, float *restrict v, const float *restrict g,
+                          size_t n, const step_consts *k)
 {
+    const float b1 = k->b1, b2 = k->b2, ob1 = 1.0f - k->b1, ob2 = 1.0f - k->b2;
+    const float ss = k->step_size, ic = k->inv_sqrt_c2, eps = k->eps;
     for (size_t i = 0; i < n; i++) {
-        double mi = k->b1 * m[i] + (1 - k->b1) * g[i];
-        double vi = k->b2 * v[i] + (1 - k->b2) * (double)g[i] * g[i];
-        m[i] = (float)mi;
-        v[i] = (float)vi;
-        x[i] -= (float)(lr * (mi / k->c1) / (sqrt(vi / k->c2) + k->eps));
+        float gi = g[i];
+        float mi = b1 * m[i] + ob1 * gi;
+        float vi = b2 * v[i] + ob2 * gi * gi;
+        m[i] = mi;
+        v[i] = vi;
+        x[i] -= ss * mi / (sqrtf(vi) * ic + eps);
     }
 }
 
-g3d_status g3d_adam_step(g3d_adam *a, g3d_gaussians *model, const g3d_gaussians *grad,
-                         double extent)
+/* Gaussians [i0, i1): every group with its rate; the SH of consecutive Gaussians are one
+ * contiguous run, the DC and the rest differing only in the step size. */
+static void update_range(g3d_adam *a, g3d_gaussians *x, const g3d_gaussians *g, size_t i0, size_t i1,
+                         const step_consts k[G3D_PG_COUNT])
+{
+    const size_t c = i1 - i0, K3 = 3 * (size_t)G3D_SH_COEFFS(x->sh_degree);
+    update(x->means + 3 * i0, a->m.means + 3 * i0, a->v.means + 3 * i0, g->means + 3 * i0, 3 * c, &k[G3D_PG_MEANS]);
+    update(x->log_scales + 3 * i0, a->m.log_scales + 3 * i0, a->v.log_scales + 3 * i0, g->log_scales + 3 * i0,
+           3 * c, &k[G3D_PG_SCALES]);
+    update(x->rots + 4 * i0, a->m.rots + 4 * i0, a->v.rots + 4 * i0, g->rots + 4 * i0, 4 * c, &k[G3D_PG_ROTS]);
+    update(x->opacity_logits + i0, a->m.opacity_logits + i0, a->v.opacity_logits + i0, g->opacity_logits + i0, c,
+           &k[G3D_PG_OPACITY]);
+    const step_consts *dc = &k[G3D_PG_SH_DC], *rest = &k[G3D_PG_SH_REST];
+    const float b1 = dc->b1, b2 = dc->b2, ob1 = 1.0f - dc->b1, ob2 = 1.0f - dc->b2;
+    const float ssd = dc->step_size, ssr = rest->step_size, ic = dc->inv_sqrt_c2, eps = dc->eps;
+    float *restrict xs = x->sh + K3 * i0, *restrict ms = a->m.sh + K3 * i0, *restrict vs = a->v.sh + K3 * i0;
+    const float *restrict gs = g->sh + K3 * i0;
+    for (size_t i = 0; i < c; i++)
+        for (size_t j = 0; j < K3; j++) {
+            const size_t e = i * K3 + j;
+            float gi = gs[e];
+            float mi = b1 * ms[e] + ob1 * gi;
+            float vi = b2 * vs[e] + ob2 * gi * gi;
+            ms[e] = mi;
+            vs[e] = vi;
+            xs[e] -= (j < 3 ? ssd : ssr) * mi / (sqrtf(vi) * ic + eps);
+        }
+}
+
+g3d_status g3d_adam_step(g3d_adam *a, g3d_gaussians *model, const g3d_gaussians *grad, double extent)
+{
+    return g3d_adam_step_visible(a, model, grad, extent, NULL);
+}
+
+g3d_status g3d_adam_step_visible(g3d_adam *a, g3d_gaussians *model, const g3d_gaussians *grad, double extent,
+                                 const int32_t *radii)
 {
     if (grad->n != model->n || grad->sh_degree != model->sh_degree || a->m.n != model->n ||
         a->v.n != model->n || a->m.sh_degree != model->sh_degree)
@@ -77,29 +117,32 @@ g3d_status g3d_adam_step(g3d_adam *a, g3d_gaussians *model, const g3d_gaussians 
                        grad->sh_degree, (long long)a->m.n);
     double means_lr = g3d_adam_means_lr(&a->p, a->step, extent);
     a->step++;
-    step_consts k = {a->p.beta1, a->p.beta2, 1 - pow(a->p.beta1, (double)a->step),
-                     1 - pow(a->p.beta2, (double)a->step), a->p.eps};
-    const size_t n = (size_t)model->n, K = (size_t)G3D_SH_COEFFS(model->sh_degree);
+    /* bias corrections folded into the step size and the denominator:
+     * lr m/c1 / (sqrt(v/c2) + eps) = (lr/c1) m / (sqrt(v) / sqrt(c2) + eps) */
+    const double c1 = 1 - pow(a->p.beta1, (double)a->step), c2 = 1 - pow(a->p.beta2, (double)a->step);
+    const size_t n = (size_t)model->n;
     const double *lr = a->p.lr;
+    step_consts k[G3D_PG_COUNT];
+    for (int gi = 0; gi < G3D_PG_COUNT; gi++)
+        k[gi] = (step_consts){(float)a->p.beta1, (float)a->p.beta2,
+                              (float)((gi == G3D_PG_MEANS ? means_lr : lr[gi]) / c1), (float)(1.0 / sqrt(c2)),
+                              (float)a->p.eps};
     /* element-wise, so blocks of Gaussians can go to any thread: the result never depends on
-     * the thread count */
+     * the thread count. With radii, runs of visible Gaussians (consecutive ones are mostly
+     * neighbours in the scene, so runs are long). */
 #pragma omp parallel for schedule(static)
     for (size_t b = 0; b < n; b += 256) {
-        const size_t e = b + 256 < n ? b + 256 : n, c = e - b;
-        update(model->means + 3 * b, a->m.means + 3 * b, a->v.means + 3 * b, grad->means + 3 * b, 3 * c,
-               means_lr, &k);
-        update(model->log_scales + 3 * b, a->m.log_scales + 3 * b, a->v.log_scales + 3 * b,
-               grad->log_scales + 3 * b, 3 * c, lr[G3D_PG_SCALES], &k);
-        update(model->rots + 4 * b, a->m.rots + 4 * b, a->v.rots + 4 * b, grad->rots + 4 * b, 4 * c,
-               lr[G3D_PG_ROTS], &k);
-        update(model->opacity_logits + b, a->m.opacity_logits + b, a->v.opacity_logits + b,
-               grad->opacity_logits + b, c, lr[G3D_PG_OPACITY], &k);
-        for (size_t i = b; i < e; i++) {
-            size_t o = i * K * 3;
-            update(model->sh + o, a->m.sh + o, a->v.sh + o, grad->sh + o, 3, lr[G3D_PG_SH_DC], &k);
-            if (K > 1)
-                update(model->sh + o + 3, a->m.sh + o + 3, a->v.sh + o + 3, grad->sh + o + 3,
-                       (K - 1) * 3, lr[G3D_PG_SH_REST], &k);
+        const size_t e = b + 256 < n ? b + 256 : n;
+        if (!radii) {
+            update_range(a, model, grad, b, e, k);
+            continue;
+        }
+        for (size_t i = b; i < e;) {
+            while (i < e && radii[i] <= 0) i++;
+            size_t j = i;
+            while (j < e && radii[j] > 0) j++;
+            if (j > i) update_range(a, model, grad, i, j, k);
+            i = j;
         }
     }
     return G3D_OK;

@@ -393,66 +393,43 @@ static g3d_status bin_and_sort(g3d_raster_ws *ws, int64_t n)
 
 /* ---- blend --------------------------------------------------------------------------------- */
 
-/* The blend works on whole 16-pixel tile rows as GCC vectors: every lane does the same
+/* The blend works on tile rows as GCC vectors (raster_rows.inc): every lane does the same
  * operations as the scalar formula would, in the same order per pixel, so results do not depend
- * on the vector width the compiler picks; conditions become lane masks. */
-typedef float vf __attribute__((vector_size(TILE * sizeof(float))));
-typedef int32_t vi __attribute__((vector_size(TILE * sizeof(int32_t))));
-
-/* No vector is passed to or returned from a function: the calling convention for them differs
- * between the instruction-set builds below, so the helpers are macros or work through pointers. */
-#define VSPLAT(x) ((vf){0} + (x))
-#define VISPLAT(x) ((vi){0} + (x))
-/* m ? a : b for masks of all-ones / all-zeros lanes */
-#define VSEL(m, a, b) ((vf)(((m) & (vi)(a)) | (~(m) & (vi)(b))))
-#define VISEL(m, a, b) (((m) & (a)) | (~(m) & (b)))
+ * on the vector width; conditions become lane masks. The per-pixel state of a tile lives in
+ * these structs, row-major, so a row loop can take any run of lanes of it. */
 #define VINLINE static inline __attribute__((always_inline))
 
-/* In place, exp(x) for x <= 0 (Cephes' reduction and polynomial, about 1 ulp) on every lane,
- * with no libm call; the forward and backward both use it, so they agree exactly. */
-VINLINE void vexp_nonpos(vf *xp)
-{
-    vf x = *xp;
-    x = VSEL(x < VSPLAT(-87.0f), VSPLAT(-87.0f), x);
-    vf y = x * 1.44269504088896341f + 0.5f;
-    vi n = __builtin_convertvector(y, vi);            /* truncates toward zero ... */
-    n += (vi)(__builtin_convertvector(n, vf) > y);      /* ... floor: minus one where it rounded up */
-    vf nf = __builtin_convertvector(n, vf);
-    vf r = x - nf * 0.693359375f + nf * 2.12194440e-4f;
-    vf q = VSPLAT(1.9875691500e-4f);
-    q = q * r + 1.3981999507e-3f;
-    q = q * r + 8.3334519073e-3f;
-    q = q * r + 4.1665795894e-2f;
-    q = q * r + 1.6666665459e-1f;
-    q = q * r + 5.0000001201e-1f;
-    q = q * r * r + r + 1.0f;
-    *xp = q * (vf)((n + 127) << 23);
-}
+typedef struct fwd_tile {
+    float T[TILE][TILE], C[4][TILE][TILE];   /* transmittance; rgb and depth accumulated */
+    int32_t last[TILE][TILE], done[TILE][TILE];
+} __attribute__((aligned(64))) fwd_tile;
 
-/* Any lane set? */
-VINLINE int vany(const vi *m)
-{
-    int32_t r = 0;
-    for (int i = 0; i < TILE; i++) r |= (*m)[i];
-    return r != 0;
-}
+typedef struct bwd_tile {
+    /* transmittance now and final, colour+depth accumulated behind, the previous
+     * (nearer-behind) contributor's alpha and colour, the output gradients */
+    float T[TILE][TILE], Tf[TILE][TILE], acc[4][TILE][TILE], lastal[TILE][TILE], lastc[4][TILE][TILE];
+    float dp[4][TILE][TILE], da[TILE][TILE];
+    int32_t last[TILE][TILE];
+} __attribute__((aligned(64))) bwd_tile;
 
-/* Sum of the lanes, in lane order. */
-VINLINE float vsum(const vf *v)
-{
-    float s = 0.0f;
-    for (int i = 0; i < TILE; i++) s += (*v)[i];
-    return s;
-}
+/* Footprints at most HALF pixels wide take the half-row path. The widths are literal
+ * numbers: the included file pastes them into its function names. */
+#define HALF 8
+_Static_assert(TILE == 2 * HALF, "the row loops are built for 16-pixel tiles");
+#define LANES 16
+#include "raster_rows.inc"
+#undef LANES
+#define LANES 8
+#include "raster_rows.inc"
+#undef LANES
 
-/* Lanes lx0..lx1 of a row. */
-VINLINE void lane_range(int lx0, int lx1, vi *out)
-{
-    for (int i = 0; i < TILE; i++) (*out)[i] = -(i >= lx0 && i <= lx1);
-}
+/* The first lane of the half row that holds lanes lx0..lx1 (lx1 - lx0 < HALF). */
+static inline int half_offset(int lx0) { return lx0 < TILE - HALF ? lx0 : TILE - HALF; }
 
-/* Pixel box of Gaussian gi inside tile (tx, ty), tile-local inclusive bounds. */
-static void local_box(const g3d_raster_ws *ws, int32_t gi, int tx, int ty, int *x0, int *x1, int *y0, int *y1)
+/* Pixel box of Gaussian gi inside tile (tx, ty), tile-local inclusive bounds. Inlined into the
+ * instruction-set builds of the blends: the baseline build has no rounding instruction and
+ * calls libm for ceilf / floorf, which cost as much as a small Gaussian's rows. */
+VINLINE void local_box(const g3d_raster_ws *ws, int32_t gi, int tx, int ty, int *x0, int *x1, int *y0, int *y1)
 {
     const float *q = ws->pk + (size_t)PK * gi;
     const float mx = q[PK_MX] - (float)(tx * TILE), my = q[PK_MY] - (float)(ty * TILE);
@@ -472,79 +449,46 @@ BLEND_TARGETS
 static void blend_tile(g3d_raster_ws *ws, int64_t tile, float *rgb, float *alpha, float *depth)
 {
     const int W = ws->W, H = ws->H;
-    const int tx = (int)(tile % ws->gx), ty = (int)(tile / ws->gx);
-    vf T[TILE], C0[TILE], C1[TILE], C2[TILE], D[TILE];
-    vi last[TILE], done[TILE];
-    vf px;
-    for (int i = 0; i < TILE; i++) px[i] = (float)(tx * TILE + i);
+    const int tx = (int)(tile % ws->gx), ty = (int)(tile / ws->gx), xt = tx * TILE, yt = ty * TILE;
+    fwd_tile st;
     int active = 0;
-    for (int ly = 0; ly < TILE; ly++) {
-        T[ly] = VSPLAT(1.0f);
-        C0[ly] = C1[ly] = C2[ly] = D[ly] = VSPLAT(0.0f);
-        last[ly] = VISPLAT(-1);
-        int y = ty * TILE + ly;
+    for (int ly = 0; ly < TILE; ly++)
         for (int i = 0; i < TILE; i++) {
-            int out = !(tx * TILE + i < W && y < H);
-            done[ly][i] = -out;
+            int out = !(xt + i < W && yt + ly < H);
+            st.T[ly][i] = 1.0f;
+            st.C[0][ly][i] = st.C[1][ly][i] = st.C[2][ly][i] = st.C[3][ly][i] = 0.0f;
+            st.last[ly][i] = -1;
+            st.done[ly][i] = -out;
             active += !out;
         }
-    }
     const int64_t a = ws->tile_start[tile], b = ws->tile_start[tile + 1];
     for (int64_t k = a; k < b && active > 0; k++) {
         const int32_t gi = ws->inst_gid[k];
         const float *q = ws->pk + (size_t)PK * gi;
-        const float mx = q[PK_MX], my = q[PK_MY], ca = q[PK_A], cb = q[PK_B], cc = q[PK_C];
-        const float o = q[PK_O], z = q[PK_Z];
-        const float cr = q[PK_RGB], cg = q[PK_RGB + 1], cbl = q[PK_RGB + 2];
-        const vi jv = VISPLAT((int32_t)(k - a));
         int lx0, lx1, ly0, ly1;
         local_box(ws, gi, tx, ty, &lx0, &lx1, &ly0, &ly1);
         if (lx0 > lx1) continue;
-        vi box;
-        lane_range(lx0, lx1, &box);
-        const vf dx = mx - px;
-        vi ended = VISPLAT(0);
-        for (int ly = ly0; ly <= ly1; ly++) {
-            const float dy = my - (float)(ty * TILE + ly);
-            vf power = -0.5f * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
-            vi act = box & ~done[ly] & (power <= VSPLAT(0.0f));
-            if (!vany(&act)) continue;
-            vf ex = VSEL(act, power, VSPLAT(0.0f));
-            vexp_nonpos(&ex);
-            vf al = o * ex;
-            al = VSEL(al > VSPLAT(ALPHA_MAX), VSPLAT(ALPHA_MAX), al);
-            act &= al >= VSPLAT(ALPHA_MIN);
-            vf tn = T[ly] * (1.0f - al);
-            vi term = act & (tn < VSPLAT(T_MIN));
-            done[ly] |= term;
-            ended += term;
-            vi upd = act & ~term;
-            vf w = al * T[ly];
-            C0[ly] += VSEL(upd, w * cr, VSPLAT(0.0f));
-            C1[ly] += VSEL(upd, w * cg, VSPLAT(0.0f));
-            C2[ly] += VSEL(upd, w * cbl, VSPLAT(0.0f));
-            D[ly] += VSEL(upd, w * z, VSPLAT(0.0f));
-            T[ly] = VSEL(upd, tn, T[ly]);
-            last[ly] = VISEL(upd, jv, last[ly]);
-        }
-        for (int i = 0; i < TILE; i++) active += ended[i];   /* ended lanes hold -1 */
+        if (lx1 - lx0 < HALF)
+            active += fwd_rows_8(&st, q, xt, yt, half_offset(lx0), lx0, lx1, ly0, ly1, (int32_t)(k - a));
+        else
+            active += fwd_rows_16(&st, q, xt, yt, 0, lx0, lx1, ly0, ly1, (int32_t)(k - a));
     }
     const float *bg = ws->s.bg;
     for (int ly = 0; ly < TILE; ly++) {
-        int y = ty * TILE + ly;
+        int y = yt + ly;
         if (y >= H) break;
         for (int i = 0; i < TILE; i++) {
-            int x = tx * TILE + i;
+            int x = xt + i;
             if (x >= W) break;
             size_t pix = (size_t)y * W + x;
-            float t = T[ly][i];
-            rgb[3 * pix] = C0[ly][i] + t * bg[0];
-            rgb[3 * pix + 1] = C1[ly][i] + t * bg[1];
-            rgb[3 * pix + 2] = C2[ly][i] + t * bg[2];
+            float t = st.T[ly][i];
+            rgb[3 * pix] = st.C[0][ly][i] + t * bg[0];
+            rgb[3 * pix + 1] = st.C[1][ly][i] + t * bg[1];
+            rgb[3 * pix + 2] = st.C[2][ly][i] + t * bg[2];
             if (alpha) alpha[pix] = 1.0f - t;
-            if (depth) depth[pix] = D[ly][i];
+            if (depth) depth[pix] = st.C[3][ly][i];
             ws->final_t[pix] = t;
-            ws->last[pix] = last[ly][i];
+            ws->last[pix] = st.last[ly][i];
         }
     }
 }
@@ -596,46 +540,35 @@ static void blend_tile_bwd(g3d_raster_ws *ws, int64_t tile, const float *d_rgb, 
                            const float *d_depth)
 {
     const int W = ws->W, H = ws->H;
-    const int tx = (int)(tile % ws->gx), ty = (int)(tile / ws->gx);
-    /* per pixel, row by row: transmittance now and final, colour+depth accumulated behind,
-     * the previous (nearer-behind) contributor's alpha and colour, the output gradients */
-    vf T[TILE], Tf[TILE], acc[4][TILE], lastal[TILE], lastc[4][TILE], dp[4][TILE], da[TILE];
-    vi last[TILE];
-    vf px;
-    for (int i = 0; i < TILE; i++) px[i] = (float)(tx * TILE + i);
+    const int tx = (int)(tile % ws->gx), ty = (int)(tile / ws->gx), xt = tx * TILE, yt = ty * TILE;
+    bwd_tile st;
     int32_t maxlast = -1;
-    const float *bg = ws->s.bg;
     for (int ly = 0; ly < TILE; ly++) {
-        const int y = ty * TILE + ly;
-        for (int c = 0; c < 4; c++) acc[c][ly] = lastc[c][ly] = VSPLAT(0.0f);
-        lastal[ly] = VSPLAT(0.0f);
+        const int y = yt + ly;
         for (int i = 0; i < TILE; i++) {
-            const int x = tx * TILE + i;
+            const int x = xt + i;
+            for (int c = 0; c < 4; c++) st.acc[c][ly][i] = st.lastc[c][ly][i] = 0.0f;
+            st.lastal[ly][i] = 0.0f;
             if (x < W && y < H) {
                 size_t pix = (size_t)y * W + x;
-                T[ly][i] = Tf[ly][i] = ws->final_t[pix];
-                last[ly][i] = ws->last[pix];
-                for (int c = 0; c < 3; c++) dp[c][ly][i] = d_rgb[3 * pix + c];
-                dp[3][ly][i] = d_depth ? d_depth[pix] : 0.0f;
-                da[ly][i] = d_alpha ? d_alpha[pix] : 0.0f;
+                st.T[ly][i] = st.Tf[ly][i] = ws->final_t[pix];
+                st.last[ly][i] = ws->last[pix];
+                for (int c = 0; c < 3; c++) st.dp[c][ly][i] = d_rgb[3 * pix + c];
+                st.dp[3][ly][i] = d_depth ? d_depth[pix] : 0.0f;
+                st.da[ly][i] = d_alpha ? d_alpha[pix] : 0.0f;
             } else {
-                T[ly][i] = Tf[ly][i] = 1.0f;
-                last[ly][i] = -1;
-                dp[0][ly][i] = dp[1][ly][i] = dp[2][ly][i] = dp[3][ly][i] = da[ly][i] = 0.0f;
+                st.T[ly][i] = st.Tf[ly][i] = 1.0f;
+                st.last[ly][i] = -1;
+                st.dp[0][ly][i] = st.dp[1][ly][i] = st.dp[2][ly][i] = st.dp[3][ly][i] = st.da[ly][i] = 0.0f;
             }
-            if (last[ly][i] > maxlast) maxlast = last[ly][i];
+            if (st.last[ly][i] > maxlast) maxlast = st.last[ly][i];
         }
     }
+    const float *bg = ws->s.bg;
     const int64_t a = ws->tile_start[tile];
     for (int64_t k = a + maxlast; k >= a; k--) {
         const int32_t gi = ws->inst_gid[k];
-        const vi jv = VISPLAT((int32_t)(k - a));
         const float *q = ws->pk + (size_t)PK * gi;
-        const float mx = q[PK_MX], my = q[PK_MY], ca = q[PK_A], cb = q[PK_B], cc = q[PK_C];
-        const float o = q[PK_O];
-        const float col[4] = {q[PK_RGB], q[PK_RGB + 1], q[PK_RGB + 2], q[PK_Z]};
-        vf g_mx = VSPLAT(0.0f), g_my = g_mx, g_a = g_mx, g_b = g_mx, g_c = g_mx, g_o = g_mx;
-        vf g_col[4] = {g_mx, g_mx, g_mx, g_mx};
         int lx0, lx1, ly0, ly1;
         local_box(ws, gi, tx, ty, &lx0, &lx1, &ly0, &ly1);
         float *r = ws->rec + (size_t)ws->inst_src[k] * REC;
@@ -643,46 +576,10 @@ static void blend_tile_bwd(g3d_raster_ws *ws, int64_t tile, const float *d_rgb, 
             for (int c = 0; c < REC; c++) r[c] = 0.0f;
             continue;
         }
-        vi box;
-        lane_range(lx0, lx1, &box);
-        const vf dx = mx - px;
-        for (int ly = ly0; ly <= ly1; ly++) {
-            const float dy = my - (float)(ty * TILE + ly);
-            vf power = -0.5f * (ca * dx * dx + cc * dy * dy) - cb * dx * dy;
-            vi act = box & (jv <= last[ly]) & (power <= VSPLAT(0.0f));
-            if (!vany(&act)) continue;
-            vf G = VSEL(act, power, VSPLAT(0.0f));
-            vexp_nonpos(&G);
-            vf al = o * G;
-            vi sat = al > VSPLAT(ALPHA_MAX);
-            al = VSEL(sat, VSPLAT(ALPHA_MAX), al);
-            act &= al >= VSPLAT(ALPHA_MIN);
-            vf om = 1.0f - al;
-            T[ly] = VSEL(act, T[ly] / om, T[ly]);      /* transmittance in front of this Gaussian */
-            vf w = al * T[ly];
-            vf dal = VSPLAT(0.0f);
-            for (int c = 0; c < 4; c++) {
-                g_col[c] += VSEL(act, w * dp[c][ly], VSPLAT(0.0f));
-                acc[c][ly] = VSEL(act, lastal[ly] * lastc[c][ly] + (1.0f - lastal[ly]) * acc[c][ly], acc[c][ly]);
-                lastc[c][ly] = VSEL(act, VSPLAT(col[c]), lastc[c][ly]);
-                dal += (col[c] - acc[c][ly]) * dp[c][ly];
-            }
-            lastal[ly] = VSEL(act, al, lastal[ly]);
-            dal *= T[ly];
-            vf bgdot = bg[0] * dp[0][ly] + bg[1] * dp[1][ly] + bg[2] * dp[2][ly];
-            dal += Tf[ly] / om * (da[ly] - bgdot);
-            vi grad_on = act & ~sat;                 /* alpha clamped: no gradient to G or opacity */
-            g_o += VSEL(grad_on, G * dal, VSPLAT(0.0f));
-            vf dpow = VSEL(grad_on, al * dal, VSPLAT(0.0f));
-            g_mx += dpow * (-ca * dx - cb * dy);
-            g_my += dpow * (-cc * dy - cb * dx);
-            g_a += dpow * (-0.5f * dx * dx);
-            g_b += dpow * (-dx * dy);
-            g_c += dpow * (-0.5f * dy * dy);
-        }
-        r[0] = vsum(&g_mx); r[1] = vsum(&g_my); r[2] = vsum(&g_a); r[3] = vsum(&g_b); r[4] = vsum(&g_c);
-        r[5] = vsum(&g_o);
-        for (int c = 0; c < 4; c++) r[6 + c] = vsum(&g_col[c]);
+        if (lx1 - lx0 < HALF)
+            bwd_rows_8(&st, q, xt, yt, half_offset(lx0), lx0, lx1, ly0, ly1, (int32_t)(k - a), bg, r);
+        else
+            bwd_rows_16(&st, q, xt, yt, 0, lx0, lx1, ly0, ly1, (int32_t)(k - a), bg, r);
     }
 }
 
@@ -822,9 +719,15 @@ g3d_status g3d_raster_bwd(g3d_raster_ws *ws, const g3d_gaussians *g, const float
     for (int64_t i = 0; i < n; i++) {
         if (ws->radii[i] <= 0) continue;
         double r[REC] = {0};
+        int any = 0;
         for (int64_t k = ws->offs[i]; k < ws->offs[i + 1]; k++)
-            for (int c = 0; c < REC; c++) r[c] += ws->rec[(size_t)k * REC + c];
-        project_bwd(ws, g, i, r, grads, grad2d);
+            for (int c = 0; c < REC; c++) {
+                r[c] += ws->rec[(size_t)k * REC + c];
+                any |= ws->rec[(size_t)k * REC + c] != 0.0f;
+            }
+        /* hidden everywhere (behind saturated pixels, or outside every pixel's list): every
+         * gradient term would be a zero */
+        if (any) project_bwd(ws, g, i, r, grads, grad2d);
     }
     return G3D_OK;
 }

@@ -12,6 +12,7 @@
 #include "gen3d/ckpt.h"
 #include "gen3d/loss.h"
 #include "gen3d/raster.h"
+#include "gen3d/resize.h"
 
 void g3d_train_params_default(g3d_train_params *p, int64_t iterations)
 {
@@ -21,6 +22,8 @@ void g3d_train_params_default(g3d_train_params *p, int64_t iterations)
     p->lambda_ssim = G3D_LOSS_LAMBDA_SSIM;
     p->sh_degree_interval = 1000;
     p->densify = 1;
+    p->visible_adam = 0;
+    p->coarse_factor = 2;
     p->report_every = 50;
     g3d_adam_params_default(&p->adam);
     p->adam.means_lr_steps = iterations;
@@ -50,6 +53,38 @@ static void zero_grads(g3d_gaussians *gr, int64_t n)
     memset(gr->opacity_logits, 0, (size_t)n * sizeof(float));
     memset(gr->sh, 0, (size_t)n * K3 * sizeof(float));
     gr->n = n;
+}
+
+/* The views downscaled by f (area filter for the images and masks; a mask pixel stays valid
+ * where most of what it covers was): the coarse part of the schedule trains on these. */
+static g3d_status coarse_views(const g3d_train_view *views, int n, int f, g3d_train_view **out, g3d_image **imgs)
+{
+    g3d_train_view *v = g3d_calloc((size_t)n, sizeof *v, "coarse views");
+    g3d_image *im = g3d_calloc(2 * (size_t)n, sizeof *im, "coarse images");
+    g3d_status rc = v && im ? G3D_OK : G3D_ERR_NOMEM;
+    for (int i = 0; rc == G3D_OK && i < n; i++) {
+        int w = (views[i].cam.K.width + f / 2) / f, h = (views[i].cam.K.height + f / 2) / f;
+        w = w > 0 ? w : 1;
+        h = h > 0 ? h : 1;
+        v[i].cam.c2w = views[i].cam.c2w;
+        v[i].cam.K = g3d_intrinsics_resize(views[i].cam.K, w, h);
+        rc = g3d_image_resize(views[i].image, w, h, G3D_RESIZE_AREA, &im[2 * i]);
+        v[i].image = &im[2 * i];
+        if (rc == G3D_OK && views[i].mask) {
+            rc = g3d_image_resize(views[i].mask, w, h, G3D_RESIZE_AREA, &im[2 * i + 1]);
+            v[i].mask = &im[2 * i + 1];
+        }
+    }
+    if (rc != G3D_OK) {
+        for (int i = 0; im && i < 2 * n; i++) g3d_image_free(&im[i]);
+        free(im);
+        free(v);
+        v = NULL;
+        im = NULL;
+    }
+    *out = v;
+    *imgs = im;
+    return rc;
 }
 
 /* Everything the loop carries from one iteration to the next: saving it and loading it back
@@ -262,6 +297,8 @@ g3d_status g3d_train(g3d_gaussians *g, const g3d_train_view *views, int nviews,
     size_t npx = (size_t)maxw * maxh;
 
     train_state s = {0};
+    g3d_train_view *coarse = NULL;
+    g3d_image *coarse_img = NULL;
     g3d_raster_ws *ws = NULL;
     g3d_gaussians grads = {0};
     float *rgb = NULL, *drgb = NULL, *grad2d = NULL;
@@ -283,6 +320,8 @@ g3d_status g3d_train(g3d_gaussians *g, const g3d_train_view *views, int nviews,
         s.order = rc == G3D_OK ? g3d_calloc((size_t)nviews, sizeof(int32_t), "view order") : NULL;
         if (rc == G3D_OK && !s.order) rc = G3D_ERR_NOMEM;
     }
+    const int coarse_on = p->coarse_until > s.it && p->coarse_factor > 1;
+    if (rc == G3D_OK && coarse_on) rc = coarse_views(views, nviews, p->coarse_factor, &coarse, &coarse_img);
     if (rc == G3D_OK) rc = g3d_raster_ws_create(&ws);
     if (rc == G3D_OK) rc = g3d_gaussians_create(&grads, g->capacity, g->sh_degree);
     if (rc == G3D_OK) {
@@ -316,7 +355,8 @@ g3d_status g3d_train(g3d_gaussians *g, const g3d_train_view *views, int nviews,
             }
             s.remaining = nviews;
         }
-        const g3d_train_view *v = &views[s.order[--s.remaining]];
+        const int vi = s.order[--s.remaining];
+        const g3d_train_view *v = coarse_on && it <= p->coarse_until ? &coarse[vi] : &views[vi];
         rs.sh_degree_active = (int)((it - 1) / (p->sh_degree_interval > 0 ? p->sh_degree_interval : 1));
         if (rs.sh_degree_active > g->sh_degree) rs.sh_degree_active = g->sh_degree;
 
@@ -331,7 +371,7 @@ g3d_status g3d_train(g3d_gaussians *g, const g3d_train_view *views, int nviews,
         if ((rc = g3d_raster_bwd(ws, g, drgb, NULL, NULL, &grads, grad2d)) != G3D_OK) break;
         const int dens_on = p->densify && it < p->dens.until;
         if (dens_on) g3d_densify_accumulate(&s.st, grad2d, radii, g->n);
-        if ((rc = g3d_adam_step(&s.adam, g, &grads, extent)) != G3D_OK) break;
+        if ((rc = g3d_adam_step_visible(&s.adam, g, &grads, extent, p->visible_adam ? radii : NULL)) != G3D_OK) break;
         if (dens_on) {
             if (it > p->dens.from && it % p->dens.interval == 0) {
                 int large = p->dens.opacity_reset_interval > 0 && it > p->dens.opacity_reset_interval;
@@ -369,5 +409,8 @@ g3d_status g3d_train(g3d_gaussians *g, const g3d_train_view *views, int nviews,
     g3d_densify_stats_free(&s.st);
     g3d_gaussians_free(&grads);
     free(rgb); free(drgb); free(grad2d); free(radii); free(s.order);
+    for (int i = 0; coarse_img && i < 2 * nviews; i++) g3d_image_free(&coarse_img[i]);
+    free(coarse_img);
+    free(coarse);
     return rc;
 }
