@@ -1,17 +1,19 @@
-/* 3x3 stride-1 convolutions by Winograd's minimal filtering F(2x2, 3x3): each 2x2 block of
- * outputs ("tile") takes 16 multiplies per input channel instead of 36.
+/* 3x3 stride-1 convolutions by Winograd's minimal filtering F(m x m, 3x3), m = 2 or 4: each
+ * m x m block of outputs ("tile") takes (m+2)^2 multiplies per input channel instead of 9 m^2
+ * (16 instead of 36, or 36 instead of 144).
  *
- *   V = B^T d B   (4x4 input patch d of a tile, per input channel)
+ *   V = B^T d B   ((m+2)^2 input patch d of a tile, per input channel)
  *   U = G g G^T   (3x3 kernel g, per output/input channel pair; made once, at prepare time)
- *   M[xi] = U[xi] V[xi]   (16 products [cout x cin] x [cin x tiles], on the shared kernel)
- *   Y = A^T M A   (the 2x2 outputs)
+ *   M[xi] = U[xi] V[xi]   ((m+2)^2 products [cout x cin] x [cin x tiles], on the shared kernel)
+ *   Y = A^T M A   (the m x m outputs)
  *
  * A task is one block of at most 132 output channels and one panel of 64 tiles. For each block
  * of input channels it transforms the patches (16 tiles at a time, vectorised across tiles,
- * from row buffers that already hold the padding) into 16 panels, runs the 16 products into
- * per-task accumulators, and finally transforms back and applies the epilogue. The transforms
- * use only additions and halvings, so the result stays within a few float roundings of the
- * direct sum; each output is computed in a fixed order, independent of the thread count. */
+ * from row buffers that already hold the padding) into (m+2)^2 panels, runs the products into
+ * per-task accumulators, and finally transforms back and applies the epilogue. F(2x2)'s
+ * transforms use only additions and halvings (a few float roundings from the direct sum);
+ * F(4x4)'s scale by up to 8 (about 20x that error). Each output is computed in a fixed order,
+ * independent of the thread count. */
 #include "nn/nn_int.h"
 
 #include <omp.h>
