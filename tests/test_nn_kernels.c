@@ -376,7 +376,9 @@ TEST(independent_of_thread_count)
     const int cin = 40, cout = 50, h = 33, w = 35, n = 333, in = 200, out = 130;
     float *x = rnd((size_t)cin * h * w, 1, 1), *wc = rnd((size_t)cout * cin * 9, 2, 0.1f), *wl = rnd((size_t)out * in, 3, 0.1f);
     float *tok = rnd((size_t)n * in, 4, 1), *qkv = rnd((size_t)n * 3 * 64, 5, 1), *g = rnd(cout, 6, 1);
-    float *ref[5] = {0}, *got[5];
+    /* prepared: F(2x2) at 40->50, F(4x4) at 64->70 */
+    float *x4 = rnd((size_t)64 * h * w, 7, 1), *w4 = rnd((size_t)70 * 64 * 9, 8, 0.1f);
+    float *ref[7] = {0}, *got[7];
     const int maxt = omp_get_max_threads();
     for (int t = 1; t <= 3; t++) {
         omp_set_num_threads(t);
@@ -393,8 +395,19 @@ TEST(independent_of_thread_count)
         g3d_nn_conv dw = g3d_nn_conv_make(cin, cin, 3, 1, 1, wc, NULL);
         dw.groups = cin;
         CHECK_OK(g3d_nn_conv_forward(&dw, x, h, w, got[4], NULL));
-        const size_t sz[5] = {(size_t)cout * h * w, (size_t)n * out, (size_t)n * 64, (size_t)cout * h * w, (size_t)cin * h * w};
-        for (int i = 0; i < 5; i++) {
+        got[5] = malloc(sizeof(float) * cout * h * w);
+        CHECK_OK(g3d_nn_conv_prepare(&c));
+        CHECK_OK(g3d_nn_conv_forward(&c, x, h, w, got[5], NULL));
+        g3d_nn_conv_release(&c);
+        got[6] = malloc(sizeof(float) * 70 * h * w);
+        g3d_nn_conv c4 = g3d_nn_conv_make(64, 70, 3, 1, 1, w4, NULL);
+        CHECK(nn_wino_tile(&c4) == 4);
+        CHECK_OK(g3d_nn_conv_prepare(&c4));
+        CHECK_OK(g3d_nn_conv_forward(&c4, x4, h, w, got[6], NULL));
+        g3d_nn_conv_release(&c4);
+        const size_t sz[7] = {(size_t)cout * h * w, (size_t)n * out,     (size_t)n * 64,    (size_t)cout * h * w,
+                              (size_t)cin * h * w,  (size_t)cout * h * w, (size_t)70 * h * w};
+        for (int i = 0; i < 7; i++) {
             if (t == 1) {
                 ref[i] = got[i];
                 continue;
@@ -404,7 +417,8 @@ TEST(independent_of_thread_count)
         }
     }
     omp_set_num_threads(maxt);
-    for (int i = 0; i < 5; i++) free(ref[i]);
+    for (int i = 0; i < 7; i++) free(ref[i]);
+    free(x4), free(w4);
     free(x), free(wc), free(wl), free(tok), free(qkv), free(g);
 }
 
