@@ -267,7 +267,7 @@ int main(int argc, char **argv)
     attn("attention sam-b global", 4096, 4096, 12, 64, 1, 1, 64);
     attn("attention vae mid", 4096, 4096, 1, 512, 1, 0, 0);
 
-    /* 3x3: implicit GEMM (as called without preparing), then prepared (Winograd F(2x2, 3x3)) */
+    /* 3x3: implicit GEMM (as called without preparing), then prepared (Winograd F(2x2) or F(4x4)) */
     for (int prep = 0; prep < 2; prep++) {
         const char *const names[2][11] = {
             {"conv3 sd 64x64x320", "conv3 sd 32x32x640", "conv3 sd 16x16x1280", "conv3 vae 256x256x256",

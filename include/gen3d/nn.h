@@ -153,8 +153,10 @@ g3d_status g3d_nn_conv_forward(const g3d_nn_conv *c, const float *x, int h, int 
 
 /* Optional, once at load time, after the weights are final (BatchNorm folded):
  *  - a 3x3, stride-1, undilated, ungrouped Conv2d with at least 16 input and output channels
- *    switches to Winograd F(2x2, 3x3): about 1.5x faster, within a few float roundings of the
- *    direct sum, at the cost of float32 transformed kernels 16/9 the size of float32 weights;
+ *    switches to Winograd: F(2x2, 3x3), about 1.5x faster, within a few float roundings of the
+ *    direct sum, transformed kernels (float32) 16/9 the size of float32 weights; with at least
+ *    64 channels on both sides F(4x4, 3x3), about 2x faster (slower on maps under ~32x32),
+ *    about 20x the rounding error of F(2x2), transformed kernels 4x the float32 weights;
  *  - a ConvTranspose2d keeps its per-phase kernels (otherwise rebuilt on every call);
  *  - anything else: nothing to do (G3D_OK).
  * Undo with g3d_nn_conv_release before freeing the weights or changing the layer. */

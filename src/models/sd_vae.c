@@ -150,6 +150,26 @@ static g3d_status level_load(const sd_ld *ld, vae_level *L, const char *side, in
     return G3D_OK;
 }
 
+/* The decoder's 3x3 convolutions through Winograd: decoding is what every pipeline runs, on
+ * maps large enough for F(4x4); its transformed kernels cost 4x the float32 weights (the
+ * encoder, used only for image-to-image, stays unprepared). */
+static g3d_status dec_prepare(g3d_sd_vae *m)
+{
+    const g3d_sd_vae_config *c = &m->cfg;
+    for (int i = 0; i < 2; i++) {
+        G3D_TRY(g3d_nn_conv_prepare(&m->dec_mid[i].c1));
+        G3D_TRY(g3d_nn_conv_prepare(&m->dec_mid[i].c2));
+    }
+    for (int l = 0; l < c->levels; l++) {
+        for (int b = 0; b < c->nres + 1; b++) {
+            G3D_TRY(g3d_nn_conv_prepare(&m->up[l].res[b].c1));
+            G3D_TRY(g3d_nn_conv_prepare(&m->up[l].res[b].c2));
+        }
+        if (m->up[l].has_resample) G3D_TRY(g3d_nn_conv_prepare(&m->up[l].resample));
+    }
+    return G3D_OK;
+}
+
 static g3d_status vae_build(g3d_sd_vae *m, const g3d_ckpt *ck)
 {
     const g3d_sd_vae_config *c = &m->cfg;
@@ -200,7 +220,8 @@ static g3d_status vae_build(g3d_sd_vae *m, const g3d_ckpt *ck)
     }
     G3D_TRY(sd_vec(&ld, &m->dec_ng, ch, "decoder.norm_out", "weight"));
     G3D_TRY(sd_vec(&ld, &m->dec_nb, ch, "decoder.norm_out", "bias"));
-    return sd_conv_load(&ld, &m->dec_out, ch, 3, 3, 1, "decoder.conv_out");
+    G3D_TRY(sd_conv_load(&ld, &m->dec_out, ch, 3, 3, 1, "decoder.conv_out"));
+    return dec_prepare(m);
 }
 
 g3d_status g3d_sd_vae_load(const g3d_ckpt *ck, g3d_sd_vae **out)

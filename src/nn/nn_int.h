@@ -73,11 +73,13 @@ g3d_status nn_gemm_run(const nn_gemm *g);
 /* Widens n 16-bit floats of type t (G3D_DT_F16 or G3D_DT_BF16) to float32. */
 void nn_widen(g3d_dtype t, const uint16_t *src, float *dst, long n);
 
-/* ---- Winograd F(2x2, 3x3) (winograd.c) ------------------------------------------------ */
+/* ---- Winograd F(2x2, 3x3) and F(4x4, 3x3) (winograd.c) -------------------------------- */
 /* 1 if c is a 3x3, stride-1, undilated, ungrouped Conv2d wide enough to gain from it. */
 int nn_wino_eligible(const g3d_nn_conv *c);
-/* The transformed kernels U [16, cout rounded up to 6, cin] (zero rows past cout); NULL if
- * out of memory. */
+/* Outputs per tile side for an eligible c: 4 (F(4x4)) or 2 (F(2x2)), from its channels. */
+int nn_wino_tile(const g3d_nn_conv *c);
+/* The transformed kernels U [(m+2)^2, cout rounded up to 6, cin] for m = nn_wino_tile(c)
+ * (zero rows past cout); NULL if out of memory. */
 float *nn_wino_weights(const g3d_nn_conv *c);
 g3d_status nn_wino_forward(const g3d_nn_conv *c, const float *U, const float *x, int h, int w, int ho, int wo, float *y,
                            const g3d_nn_epi *epi);
