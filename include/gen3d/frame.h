@@ -71,6 +71,11 @@ g3d_status g3d_frame_load_rgbd(const char *rgb_path, const char *depth_path, dou
  * image path. */
 g3d_status g3d_frame_load_rgb(const char *rgb_path, const struct g3d_depth_estimator *model, g3d_intrinsics K,
                               double fov_deg, int max_side, g3d_frame *f);
+/* The same for a picture already in memory (e.g. a text-to-image model's): rgb (h, w, 3) is
+ * taken over by the frame (zeroed here, freed on failure too); label names it in messages and
+ * becomes the frame's name. */
+g3d_status g3d_frame_from_image(g3d_image *rgb, const char *label, const struct g3d_depth_estimator *model,
+                                g3d_intrinsics K, double fov_deg, int max_side, g3d_frame *f);
 /* The built-in default input: Middlebury 2014 "Motorcycle" (the copy that scikit-image ships,
  * 741 x 500) from folder `dir`, holding motorcycle_left.png, motorcycle_right.png and
  * motorcycle_disp.npz (or the names im0.png, im1.png). Depth comes from the ground-truth

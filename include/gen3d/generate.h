@@ -24,14 +24,23 @@
  * PLUG-INS
  *   The inpainter, depth estimator and mask provider (providers.h) are either passed in (the
  *   caller keeps ownership; e.g. a diffusion inpainter or a segmentation model) or, when NULL,
- *   made by the run from the parameters and released at its end: LaMa from `lama_model` or
- *   else the classical inpainter,
- *   the depth model in `depth_model` or else depth completion, the weight-free region
- *   proposals (regions.h). A plug-in's own parameters go to its create function.
+ *   made by the run from the parameters and released at its end: Stable Diffusion from
+ *   `inpaint_model` (sd_views.h), else LaMa from `lama_model`, else the classical inpainter,
+ *   for the views and the background alike; the depth model in `depth_model` or else depth
+ *   completion, the weight-free region proposals (regions.h). A plug-in's own parameters go to
+ *   its create function.
+ *
+ * PROMPTS
+ *   The views' prompt is `prompt`, else the prompt provider's view prompt (`prompts`, or the
+ *   automatic prompts of describe.h from clip_model / caption_model), else
+ *   G3D_NEUTRAL_VIEW_PROMPT; the background's is the provider's template, else the template
+ *   with G3D_NEUTRAL_CATEGORY and G3D_NEUTRAL_COLORS. Runs with no prompt, no provider and no
+ *   inpaint_model have no prompts.
  *
  * PROGRESS AND CANCELLING
- *   `progress` receives every stage's reports (stage names "world", "extra views", "train",
- *   "render"); `cancel` is polled at each report and between the stages. A cancelled run
+ *   `progress` receives every stage's reports (stage names "text", "background", "view i/n"
+ *   for the diffusion steps, "world", "extra views", "train", "render"); `cancel` is polled at
+ *   each report and between the stages. A cancelled run
  *   returns G3D_CANCELLED. The progress fields inside the stage parameters are ignored.
  *
  * A run is deterministic for a seed and thread count. Runs in different threads are
@@ -46,6 +55,7 @@
 #include "gen3d/layers.h"
 #include "gen3d/providers.h"
 #include "gen3d/render.h"
+#include "gen3d/sd_views.h"
 #include "gen3d/train.h"
 #include "gen3d/trajectory.h"
 #include "gen3d/world.h"
@@ -53,6 +63,12 @@
 #ifdef __cplusplus
 extern "C" {
 #endif
+
+/* The views' inpainting prompt when neither the user nor a model gives one. */
+#define G3D_NEUTRAL_VIEW_PROMPT "a high-resolution photograph of the same scene, photorealistic, 8K"
+/* The background template's bracketed parts without a CLIP model (describe.h has the template). */
+#define G3D_NEUTRAL_CATEGORY "scene"
+#define G3D_NEUTRAL_COLORS "natural"
 
 typedef enum g3d_stage {
     G3D_STAGE_INPUT,    /* the input frame: files, or an image and a depth model */
@@ -86,6 +102,24 @@ typedef struct g3d_generate_params {
                                              or caption_model is given, else no prompts */
     const char *clip_model;               /* CLIP model: the background prompt's scene category */
     const char *caption_model;            /* BLIP captioner: the views' prompt */
+    const g3d_inpainter *bg_inpainter;    /* the background behind the foreground; NULL: the
+                                             views' inpainter (a conditioned inpainter, e.g. on a
+                                             LaMa-prefilled picture, plugs in here) */
+    /* ---- text and diffusion ---- */
+    const char *prompt;                   /* the user's prompt: with sd_model the text input, and
+                                             the views' inpainting prompt (NULL: the automatic
+                                             prompts, else G3D_NEUTRAL_VIEW_PROMPT) */
+    const char *sd_model;                 /* text input: a text-to-image Stable Diffusion model
+                                             draws the first image from `prompt` (sd.h), whose
+                                             depth and camera the depth model gives (input.rgb_path
+                                             must be NULL) */
+    const char *inpaint_model;            /* Stable Diffusion inpainting (or text-to-image) model
+                                             for every new view and the background (sd_views.h);
+                                             NULL: LaMa / classical as above */
+    g3d_sd_paths sd_parts;                /* vae, text_encoder, tokenizer, yaml, prediction for
+                                             both models (model is ignored) */
+    g3d_sd_view_params diffusion;         /* negative prompt, sampler, steps, guidance, native
+                                             size (also the text input's side), seam dilation */
     g3d_depth_model_params depth_model_params;
     /* ---- layers ---- */
     int layers;                       /* 1: split foreground and background (default) */
@@ -129,6 +163,8 @@ void g3d_generate_params_default(g3d_generate_params *p);
 typedef struct g3d_generate_result {
     double seconds[G3D_STAGE_COUNT];  /* wall time of each stage (0 for stages skipped) */
     double seconds_total;
+    double seconds_txt2img;           /* text input: the first image's drawing (within the input stage) */
+    double seconds_background;        /* filling the background behind the foreground (within layers) */
     int width, height;                /* of the input frame (the world's first view) */
     int views, extra_views;           /* generated views (input included) and extra views */
     int foreground_objects;

@@ -65,9 +65,21 @@ static void scaled_size(int w, int h, int max_side, int *ow, int *oh);
 g3d_status g3d_frame_load_rgb(const char *rgb_path, const g3d_depth_estimator *model, g3d_intrinsics K, double fov_deg,
                               int max_side, g3d_frame *f)
 {
+    g3d_image rgb;
+    memset(f, 0, sizeof *f);
+    G3D_TRY(g3d_image_load(rgb_path, 3, &rgb));
+    g3d_status rc = g3d_frame_from_image(&rgb, rgb_path, model, K, fov_deg, max_side, f);
+    if (rc == G3D_OK) snprintf(f->name, sizeof f->name, "rgb+model");
+    return rc;
+}
+
+g3d_status g3d_frame_from_image(g3d_image *rgb, const char *label, const g3d_depth_estimator *model, g3d_intrinsics K,
+                                double fov_deg, int max_side, g3d_frame *f)
+{
     g3d_status rc;
     memset(f, 0, sizeof *f);
-    if ((rc = g3d_image_load(rgb_path, 3, &f->rgb)) != G3D_OK) return rc;
+    f->rgb = *rgb;
+    memset(rgb, 0, sizeof *rgb);
     /* the model sees the image at the size the pipeline will use: given pixel intrinsics
      * scale with it */
     int w0 = f->rgb.w, h0 = f->rgb.h;
@@ -90,7 +102,7 @@ g3d_status g3d_frame_load_rgb(const char *rgb_path, const g3d_depth_estimator *m
     if (given) io = given_camera(K, fov_deg, f->rgb.w, f->rgb.h);
     rc = model->estimate(model->ctx, &f->rgb, NULL, NULL, &f->depth, &io);
     if (rc != G3D_OK) {
-        g3d_error_prefix(rgb_path);
+        g3d_error_prefix(label);
         g3d_frame_free(f);
         return rc;
     }
@@ -103,8 +115,8 @@ g3d_status g3d_frame_load_rgb(const char *rgb_path, const g3d_depth_estimator *m
     }
     f->cam.K = io;
     f->cam.c2w = g3d_mat4_identity();
-    snprintf(f->name, sizeof f->name, "rgb+model");
-    if ((rc = g3d_frame_validate(f, rgb_path)) != G3D_OK) g3d_frame_free(f);
+    snprintf(f->name, sizeof f->name, "%s", label);
+    if ((rc = g3d_frame_validate(f, label)) != G3D_OK) g3d_frame_free(f);
     return rc;
 }
 

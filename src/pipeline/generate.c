@@ -49,6 +49,8 @@ void g3d_generate_params_default(g3d_generate_params *p)
     g3d_video_params_default(&p->video_params);
     g3d_explore_params_default(&p->explore);
     p->explore_views = 0;
+    p->sd_parts.prediction = -1;
+    g3d_sd_view_params_default(&p->diffusion);
     p->seed = 42;
 }
 
@@ -68,10 +70,16 @@ typedef struct run {
     g3d_inpainter own_inpainter;
     g3d_depth_estimator own_depth;
     g3d_mask_provider own_masks;
-    g3d_prompt_provider own_prompts;
-    const g3d_prompt_provider *prompts;  /* NULL: none */
+    g3d_prompt_provider own_prompts;   /* the automatic prompts made here */
+    const g3d_prompt_provider *auto_prompts;  /* the caller's or own_prompts; NULL: none */
+    g3d_prompt_provider run_prompts;   /* the user's, the automatic and the neutral prompts */
+    const g3d_prompt_provider *prompts;  /* &run_prompts, or NULL: the run has no prompts */
     char *bg_prompt, *view_prompt;     /* the prompts of a run without layers */
     const g3d_inpainter *inpainter;
+    const g3d_inpainter *bg_inner;     /* the background's inpainter, timed through bg_timed */
+    g3d_inpainter bg_timed;
+    double seconds_txt2img, seconds_background;
+    char label[48];                    /* what the diffusion steps reported now belong to */
     const g3d_depth_estimator *depth;
     const g3d_mask_provider *masks;
     g3d_layers layers;
@@ -84,9 +92,16 @@ typedef struct run {
     char *tmp;                         /* the output folder being written */
 } run;
 
+/* Passes the stages' reports on; the engine's "denoise" steps are named after what they draw
+ * (the text input, the background, the view the world loop is at). */
 static int report(void *user, const char *stage, int64_t step, int64_t total, const char *info)
 {
-    const g3d_generate_params *p = user;
+    run *r = user;
+    const g3d_generate_params *p = r->p;
+    if (!strcmp(stage, "denoise"))
+        stage = r->label;
+    else if (!strcmp(stage, "world") && step < total)
+        snprintf(r->label, sizeof r->label, "view %d/%d", (int)step, (int)(total - 1));
     int stop = g3d_progress_report(&p->progress, stage, step, total, info);
     return stop || g3d_cancel_requested(&p->cancel);
 }
@@ -117,6 +132,18 @@ static g3d_status check_params(const g3d_generate_params *p)
     if (p->sh_degree < 0 || p->sh_degree > G3D_SH_MAX_DEGREE)
         return G3D_ERR(G3D_ERR_ARG, "generate: SH degree %d is not in 0..%d", p->sh_degree, G3D_SH_MAX_DEGREE);
     if (p->steps < 0 || p->steps > 10000) return G3D_ERR(G3D_ERR_ARG, "generate: %d steps (need 0..10000)", p->steps);
+    if (p->sd_model && !p->world_dir) {
+        if (!p->prompt || !p->prompt[strspn(p->prompt, " \t\r\n")])
+            return G3D_ERR(G3D_ERR_ARG, "%s: text input needs a prompt", p->sd_model);
+        if (p->frame || p->input.rgb_path || p->input.depth_path)
+            return G3D_ERR(G3D_ERR_ARG, "%s: text input draws the first image: no input image or depth", p->sd_model);
+        if (!p->depth && !p->depth_model)
+            return G3D_ERR(G3D_ERR_ARG, "%s: text input needs a depth model (MoGe-2) for the image's depth", p->sd_model);
+    }
+    if ((p->sd_model || p->inpaint_model) &&
+        (p->diffusion.size < 8 || p->diffusion.size > 4096 || p->diffusion.dilate < 0 || p->diffusion.dilate > 64))
+        return G3D_ERR(G3D_ERR_ARG, "generate: diffusion size %d (need 8..4096) or dilation %d (need 0..64)", p->diffusion.size,
+                       p->diffusion.dilate);
     if (p->last_stage == G3D_STAGE_OUTPUTS && p->output_dir && p->video) {
         if (p->video_frames < 2) return G3D_ERR(G3D_ERR_ARG, "generate: a video needs 2 frames at least, not %d", p->video_frames);
         g3d_camera probe = {g3d_intrinsics_from_fov(60, 64, 48), g3d_mat4_identity()}, *cams = NULL;
@@ -185,6 +212,17 @@ static g3d_status make_inpainter(run *r)
     const g3d_generate_params *p = r->p;
     r->inpainter = p->inpainter ? p->inpainter : &r->own_inpainter;
     if (p->inpainter) return G3D_OK;
+    if (p->inpaint_model) {
+        g3d_sd_paths paths = p->sd_parts;
+        g3d_sd *m;
+        paths.model = p->inpaint_model;
+        G3D_TRY(g3d_sd_load(&paths, &m));
+        char desc[512];
+        g3d_log(G3D_LOG_INFO, "inpainter: %s (%s)", p->inpaint_model, g3d_sd_unet_describe(g3d_sd_get_unet(m), desc, sizeof desc));
+        g3d_sd_view_params vp = p->diffusion;
+        vp.progress = r->progress;
+        return g3d_inpainter_sd_views_create(m, &vp, &r->own_inpainter);
+    }
     if (!p->lama_model) return g3d_inpainter_classic_create(NULL, &r->own_inpainter);
     G3D_TRY(g3d_inpainter_lama_create(p->lama_model, &r->own_inpainter));
     char desc[256];
@@ -192,15 +230,75 @@ static g3d_status make_inpainter(run *r)
     return G3D_OK;
 }
 
-/* The prompt provider: the caller's, or the automatic prompts from the CLIP and BLIP models. */
+/* The run's prompts (generate.h, PROMPTS): the user's view prompt, else the provider's, else
+ * the neutral one; the provider's background prompt, else the neutral template. */
+static g3d_status run_prompt(void *ctx, const g3d_image *rgb, const g3d_image *exclude, char **bg, char **view)
+{
+    const run *r = ctx;
+    *bg = *view = NULL;
+    if (r->auto_prompts) G3D_TRY(r->auto_prompts->prompt(r->auto_prompts->ctx, rgb, exclude, bg, view));
+    if (r->p->prompt) {
+        free(*view);
+        *view = NULL;
+    }
+    if (!*view) *view = strdup(r->p->prompt ? r->p->prompt : G3D_NEUTRAL_VIEW_PROMPT);
+    if (!*bg) {
+        const char *colors = G3D_NEUTRAL_COLORS;
+        *bg = g3d_background_prompt(G3D_NEUTRAL_CATEGORY, &colors, 1);
+    }
+    if (*bg && *view) return G3D_OK;
+    free(*bg);
+    free(*view);
+    *bg = *view = NULL;
+    return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+}
+
+/* The prompt provider: the caller's, or the automatic prompts from the CLIP and BLIP models
+ * (no captions when the user gives the views' prompt); wrapped into the run's prompts when
+ * anything gives or uses a prompt. */
 static g3d_status make_prompts(run *r)
 {
     const g3d_generate_params *p = r->p;
-    r->prompts = p->prompts;
-    if (p->prompts || (!p->clip_model && !p->caption_model)) return G3D_OK;
-    G3D_TRY(g3d_prompt_provider_describe_create(p->clip_model, NULL, p->caption_model, p->seed, &r->own_prompts));
-    r->prompts = &r->own_prompts;
+    const char *caption = p->prompt ? NULL : p->caption_model;
+    r->auto_prompts = p->prompts;
+    if (!p->prompts && (p->clip_model || caption)) {
+        G3D_TRY(g3d_prompt_provider_describe_create(p->clip_model, NULL, caption, p->seed, &r->own_prompts));
+        r->auto_prompts = &r->own_prompts;
+    }
+    if (!r->auto_prompts && !p->prompt && !p->inpaint_model) return G3D_OK;
+    r->run_prompts = (g3d_prompt_provider){r->auto_prompts ? r->auto_prompts->name : "neutral", r, run_prompt, NULL};
+    r->prompts = &r->run_prompts;
     return G3D_OK;
+}
+
+/* Text input: the first image drawn from the prompt at the model's native size, square; its
+ * depth and camera from the depth model (or the 60-degree convention when it gives none). */
+static g3d_status text_input(run *r)
+{
+    const g3d_generate_params *p = r->p;
+    g3d_sd_paths paths = p->sd_parts;
+    g3d_sd *m;
+    g3d_image img = {0};
+    paths.model = p->sd_model;
+    G3D_TRY(g3d_sd_load(&paths, &m));
+    int k = g3d_sd_size_multiple(m), side = p->diffusion.size / k * k;
+    g3d_sd_params sp = p->diffusion.sd;
+    sp.prompt = p->prompt;
+    sp.width = sp.height = side < k ? k : side;
+    sp.seed = p->seed;
+    sp.noise = NULL;
+    sp.progress = r->progress;
+    snprintf(r->label, sizeof r->label, "text");
+    g3d_log(G3D_LOG_INFO, "text input: %dx%d from \"%s\" (%s)", sp.width, sp.height, p->prompt, p->sd_model);
+    double t = g3d_time_now();
+    g3d_status rc = g3d_sd_txt2img(m, &sp, &img);
+    r->seconds_txt2img = g3d_time_now() - t;
+    g3d_sd_free(m);
+    if (rc == G3D_OK && sp.truncated)
+        g3d_log(G3D_LOG_WARN, "the prompts lost %d tokens beyond the text encoder's context", sp.truncated);
+    if (rc == G3D_OK) rc = g3d_frame_from_image(&img, "text", r->depth, p->input.K, p->input.fov_deg, p->input.max_side, &r->frame);
+    else g3d_image_free(&img);
+    return rc;
 }
 
 static g3d_status stage_input(run *r)
@@ -212,6 +310,9 @@ static g3d_status stage_input(run *r)
     if (p->frame) {
         G3D_TRY(g3d_frame_validate(p->frame, p->frame->name[0] ? p->frame->name : "input frame"));
         r->input = p->frame;
+    } else if (p->sd_model) {
+        G3D_TRY(text_input(r));
+        r->input = &r->frame;
     } else {
         /* only a model predicts the depth of an image; completion needs depth to start from */
         const g3d_depth_estimator *model = p->depth || p->depth_model ? r->depth : NULL;
@@ -224,6 +325,16 @@ static g3d_status stage_input(run *r)
 }
 
 /* ---- layers ---------------------------------------------------------------------------------- */
+
+/* The background's inpainter, timed (the summary's seconds_background). */
+static g3d_status timed_inpaint(void *ctx, g3d_image *image, const g3d_image *mask, const char *prompt, uint64_t seed)
+{
+    run *r = ctx;
+    double t = g3d_time_now();
+    g3d_status rc = r->bg_inner->inpaint(r->bg_inner->ctx, image, mask, prompt, seed);
+    r->seconds_background += g3d_time_now() - t;
+    return rc;
+}
 
 static g3d_status stage_layers(run *r)
 {
@@ -241,7 +352,10 @@ static g3d_status stage_layers(run *r)
     const g3d_frame *f = r->input;
     g3d_layers_params lp = p->layers_params;
     if (r->prompts) lp.prompts = r->prompts;
-    G3D_TRY(g3d_layers_compute(&f->rgb, &f->depth, r->masks, r->inpainter, r->depth, &lp, p->seed, &r->layers));
+    r->bg_inner = p->bg_inpainter ? p->bg_inpainter : r->inpainter;
+    r->bg_timed = (g3d_inpainter){r->bg_inner->name, r, timed_inpaint, NULL};
+    snprintf(r->label, sizeof r->label, "background");
+    G3D_TRY(g3d_layers_compute(&f->rgb, &f->depth, r->masks, &r->bg_timed, r->depth, &lp, p->seed, &r->layers));
     if (r->layers.bg_prompt) g3d_log(G3D_LOG_INFO, "background prompt: %s", r->layers.bg_prompt);
     return G3D_OK;
 }
@@ -504,6 +618,26 @@ static g3d_status write_video(run *r)
     return rc;
 }
 
+/* The diffusion settings both models run with. */
+static cJSON *diffusion_json(const g3d_generate_params *p)
+{
+    const g3d_sd_view_params *d = &p->diffusion;
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "negative_prompt", d->sd.negative ? d->sd.negative : "");
+    cJSON_AddStringToObject(o, "sampler", g3d_sd_sampler_name(d->sd.sampler.kind));
+    cJSON_AddNumberToObject(o, "steps", d->sd.sampler.steps);
+    cJSON_AddNumberToObject(o, "guidance", d->sd.cfg);
+    cJSON_AddBoolToObject(o, "karras", d->sd.sampler.karras);
+    cJSON_AddNumberToObject(o, "eta", d->sd.sampler.eta);
+    cJSON_AddNumberToObject(o, "size", d->size);
+    cJSON_AddNumberToObject(o, "dilate", d->dilate);
+    const char *parts[][2] = {{"vae", p->sd_parts.vae}, {"text_encoder", p->sd_parts.text_encoder},
+                              {"tokenizer", p->sd_parts.tokenizer}, {"config", p->sd_parts.yaml}};
+    for (int i = 0; i < 4; i++)
+        if (parts[i][1]) cJSON_AddStringToObject(o, parts[i][0], parts[i][1]);
+    return o;
+}
+
 static cJSON *config_json(const run *r)
 {
     const g3d_generate_params *p = r->p;
@@ -535,6 +669,11 @@ static cJSON *config_json(const run *r)
         if (p->depth_model && !p->depth) cJSON_AddStringToObject(c, "depth_model", p->depth_model);
         if (p->lama_model && !p->inpainter) cJSON_AddStringToObject(c, "lama_model", p->lama_model);
         if (p->seg_model && !p->masks) cJSON_AddStringToObject(c, "seg_model", p->seg_model);
+        if (p->layers) cJSON_AddStringToObject(c, "background_inpainter", r->bg_inner->name);
+        if (p->prompt) cJSON_AddStringToObject(c, "prompt", p->prompt);
+        if (p->sd_model) cJSON_AddStringToObject(c, "sd_model", p->sd_model);
+        if (p->inpaint_model && !p->inpainter) cJSON_AddStringToObject(c, "inpaint_model", p->inpaint_model);
+        if (p->sd_model || (p->inpaint_model && !p->inpainter)) cJSON_AddItemToObject(c, "diffusion", diffusion_json(p));
         if (r->prompts) {
             const char *bg = p->layers ? r->layers.bg_prompt : r->bg_prompt, *view = p->layers ? r->layers.view_prompt : r->view_prompt;
             cJSON_AddStringToObject(c, "prompt_provider", r->prompts->name);
@@ -557,7 +696,27 @@ static cJSON *config_json(const run *r)
     return c;
 }
 
-static cJSON *summary_json(const g3d_generate_result *res)
+/* Seconds of each generation step after the input, by part. */
+static cJSON *view_seconds_json(const g3d_world *w)
+{
+    cJSON *a = cJSON_CreateArray();
+    for (int i = 1; i < w->n_views; i++) {
+        const g3d_world_step *st = &w->steps[i];
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddNumberToObject(o, "view", i);
+        cJSON_AddNumberToObject(o, "reproject", st->seconds_reproject);
+        cJSON_AddNumberToObject(o, "inpaint", st->seconds_inpaint);
+        cJSON_AddNumberToObject(o, "depth", st->seconds_depth);
+        cJSON_AddNumberToObject(o, "align", st->seconds_align);
+        cJSON_AddNumberToObject(o, "lift", st->seconds_lift);
+        cJSON_AddNumberToObject(o, "total", st->seconds_reproject + st->seconds_inpaint + st->seconds_depth +
+                                                st->seconds_align + st->seconds_lift);
+        cJSON_AddItemToArray(a, o);
+    }
+    return a;
+}
+
+static cJSON *summary_json(const run *r, const g3d_generate_result *res)
 {
     cJSON *s = cJSON_CreateObject();
     cJSON_AddNumberToObject(s, "points", (double)res->points);
@@ -585,6 +744,9 @@ static cJSON *summary_json(const g3d_generate_result *res)
         cJSON_AddNumberToObject(s, key, res->seconds[st]);
     }
     cJSON_AddNumberToObject(s, "seconds_total", res->seconds_total);
+    if (r->p->sd_model) cJSON_AddNumberToObject(s, "seconds_txt2img", res->seconds_txt2img);
+    if (!r->p->world_dir && r->p->layers) cJSON_AddNumberToObject(s, "seconds_background", res->seconds_background);
+    if (!r->p->world_dir) cJSON_AddItemToObject(s, "seconds_per_view", view_seconds_json(&r->world));
     struct rusage ru;   /* the whole process's peak resident memory so far (Linux: KiB) */
     if (getrusage(RUSAGE_SELF, &ru) == 0) cJSON_AddNumberToObject(s, "peak_memory_mb", ru.ru_maxrss / 1024.0);
     return s;
@@ -607,6 +769,8 @@ static void collect(const run *r, g3d_generate_result *res)
     res->video_written = r->video.video_written;
     res->video_note = r->video.note;
     res->viewer_written = r->viewer_written;
+    res->seconds_txt2img = r->seconds_txt2img;
+    res->seconds_background = r->seconds_background;
 }
 
 /* The exploration cameras (a camera file for `gen3d render --coverage`) and the contact sheet. */
@@ -653,7 +817,7 @@ static g3d_status stage_outputs(run *r, g3d_generate_result *res, double t_start
     cJSON_Delete(c);
     res->seconds[G3D_STAGE_OUTPUTS] = g3d_time_now() - t0;   /* so far: the summary is the last file */
     res->seconds_total = g3d_time_now() - t_start;
-    cJSON *s = rc == G3D_OK ? summary_json(res) : NULL;
+    cJSON *s = rc == G3D_OK ? summary_json(r, res) : NULL;
     if (s) rc = write_json(r, "summary.json", s);
     cJSON_Delete(s);
     return rc;
@@ -687,7 +851,7 @@ g3d_status g3d_generate(const g3d_generate_params *p, g3d_generate_result *res_o
     memset(&r, 0, sizeof r);
     if (res_out) memset(res_out, 0, sizeof *res_out);
     r.p = p;
-    r.progress = (g3d_progress){report, (void *)p};
+    r.progress = (g3d_progress){report, &r};
     g3d_status rc = check_params(p);
     /* claim the output folder first, so that a bad one fails before minutes of work */
     if (rc == G3D_OK && p->output_dir && p->last_stage == G3D_STAGE_OUTPUTS) rc = g3d_atomic_dir_begin(p->output_dir, &r.tmp);

@@ -51,6 +51,7 @@ static int run(int argc, char **argv)
     if ((prc = g3d_cli_generate_check(&g)) != 0) return prc;
     g3d_cli_common_apply(&g.common);
     g3d_cli_generate_apply(&g);
+    if ((prc = g3d_cli_check_models(&g.p)) != 0) return prc;
     g3d_generate_params p = g.p;
     p.progress = g3d_cli_progress();
     p.cancel = g3d_cli_cancel();

@@ -3,6 +3,7 @@
 #ifndef G3D_GENERATE_OPTS_H
 #define G3D_GENERATE_OPTS_H
 
+#include "diffusion_opts.h"
 #include "input_opts.h"
 #include "world_opts.h"
 
@@ -10,6 +11,7 @@ typedef struct g3d_cli_generate {
     g3d_cli_common common;
     g3d_cli_input in;
     g3d_cli_world wo;
+    g3d_cli_diffusion df;
     g3d_generate_params p;
     int iters, no_video;
 } g3d_cli_generate;

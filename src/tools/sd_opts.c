@@ -64,17 +64,24 @@ static int sd_cli_params(sd_cli *c, g3d_sd_params *p, const char *cmd)
     if (!c->paths.model) return g3d_cli_errorf(G3D_EXIT_USAGE, "-m MODEL is required (see gen3d %s --help)", cmd);
     if (!c->prompt || !c->prompt[strspn(c->prompt, " \t\r\n")]) return g3d_cli_errorf(G3D_EXIT_USAGE, "-p PROMPT is required and may not be empty");
     if (!c->common.output) return g3d_cli_errorf(G3D_EXIT_USAGE, "-o OUT.png is required");
-    int k = g3d_sd_sampler_parse(c->sampler);
-    if (k < 0) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sampler %s: ddim, pndm, euler, euler_a or dpmpp_2m expected", c->sampler);
-    if (c->steps < 1 || c->steps > 1000) return g3d_cli_errorf(G3D_EXIT_USAGE, "--steps must be 1 to 1000");
-    if (!(c->cfg >= 0 && c->cfg <= 100)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--cfg must be 0 to 100");
-    if (!(c->eta >= 0 && c->eta <= 1)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--eta must be 0 to 1");
-    if (c->karras && (k == G3D_SD_DDIM || k == G3D_SD_PNDM)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--karras is for euler, euler_a and dpmpp_2m");
     *p = g3d_sd_defaults();
+    int rc = g3d_sd_cli_sampling(c->sampler, c->steps, "--steps", c->cfg, c->eta, c->karras, p);
     p->prompt = c->prompt;
     p->negative = c->negative;
-    p->sampler = (g3d_sd_sampler){(g3d_sd_sampler_kind)k, c->steps, (float)c->eta, c->karras, G3D_SD_PRED_EPS};
-    p->cfg = (float)c->cfg;
+    return rc;
+}
+
+int g3d_sd_cli_sampling(const char *sampler, int steps, const char *steps_flag, double cfg, double eta, int karras,
+                        g3d_sd_params *p)
+{
+    int k = g3d_sd_sampler_parse(sampler);
+    if (k < 0) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sampler %s: ddim, pndm, euler, euler_a or dpmpp_2m expected", sampler);
+    if (steps < 1 || steps > 1000) return g3d_cli_errorf(G3D_EXIT_USAGE, "%s must be 1 to 1000", steps_flag);
+    if (!(cfg >= 0 && cfg <= 100)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--cfg must be 0 to 100");
+    if (!(eta >= 0 && eta <= 1)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--eta must be 0 to 1");
+    if (karras && (k == G3D_SD_DDIM || k == G3D_SD_PNDM)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--karras is for euler, euler_a and dpmpp_2m");
+    p->sampler = (g3d_sd_sampler){(g3d_sd_sampler_kind)k, steps, (float)eta, karras, G3D_SD_PRED_EPS};
+    p->cfg = (float)cfg;
     return G3D_EXIT_OK;
 }
 

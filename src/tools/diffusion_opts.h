@@ -1,0 +1,44 @@
+/* diffusion_opts.h - generate's text and diffusion options (text input, the inpainting model,
+ * prompts, sampling), and the check that every model flag names a model of its kind. */
+#ifndef G3D_DIFFUSION_OPTS_H
+#define G3D_DIFFUSION_OPTS_H
+
+#include "cli.h"
+#include "gen3d/generate.h"
+
+typedef struct g3d_cli_diffusion {
+    const char *prompt, *negative, *sampler, *sd_model, *inpaint_model;
+    const char *vae, *text_encoder, *tokenizer, *config;
+    int steps, karras, size;
+    double cfg, eta;
+} g3d_cli_diffusion;
+
+#define G3D_DIFFUSION_OPTS(d)                                                                                     \
+    {'p', "prompt", G3D_OPT_STRING, &(d)->prompt, "TEXT", "text input with --sd-model; else the views' inpainting prompt"}, \
+    {'n', "negative", G3D_OPT_STRING, &(d)->negative, "TEXT", "what the diffusion models avoid (negative prompt)"}, \
+    {0, "sd-model", G3D_OPT_PATH, &(d)->sd_model, "MODEL", "text input: Stable Diffusion text-to-image model drawing the first image"}, \
+    {0, "inpaint-model", G3D_OPT_PATH, &(d)->inpaint_model, "MODEL", "Stable Diffusion (inpainting) model filling the new views and the background"}, \
+    {0, "sd-steps", G3D_OPT_INT, &(d)->steps, "N", "denoising steps per image"},                                \
+    {0, "cfg", G3D_OPT_DOUBLE, &(d)->cfg, "S", "classifier-free guidance scale (1: none)"},                       \
+    {0, "sampler", G3D_OPT_STRING, &(d)->sampler, "NAME", "ddim, pndm, euler, euler_a or dpmpp_2m"},            \
+    {0, "karras", G3D_OPT_FLAG, &(d)->karras, NULL, "Karras sigmas (euler, euler_a, dpmpp_2m)"},                  \
+    {0, "eta", G3D_OPT_DOUBLE, &(d)->eta, "E", "DDIM's eta (0: deterministic)"},                                 \
+    {0, "sd-size", G3D_OPT_INT, &(d)->size, "PX", "longer side the diffusion models draw at (their native size)"}, \
+    {0, "vae", G3D_OPT_PATH, &(d)->vae, "FILE", "the diffusion models' VAE from this file"},                     \
+    {0, "text-encoder", G3D_OPT_PATH, &(d)->text_encoder, "FILE", "the diffusion models' text encoder from this file"}, \
+    {0, "tokenizer", G3D_OPT_PATH, &(d)->tokenizer, "DIR|FILE", "CLIP vocabulary of the diffusion models (default: OpenAI's)"}, \
+    {0, "sd-config", G3D_OPT_PATH, &(d)->config, "YAML", "the diffusion models' original configuration (default: MODEL.yaml)"}
+
+/* The library's defaults (g3d_sd_view_params_default). */
+void g3d_cli_diffusion_init(g3d_cli_diffusion *d);
+/* Usage checks (rgb: -i was given, depth_model: --depth-model was); returns 0 or G3D_EXIT_USAGE
+ * after printing the problem. */
+int g3d_cli_diffusion_check(const g3d_cli_diffusion *d, int rgb, int depth_model);
+/* Copies the options into the pipeline's parameters; warns when the prompt has no model to use it. */
+void g3d_cli_diffusion_apply(const g3d_cli_diffusion *d, g3d_generate_params *p);
+/* Checks that each model flag of p names a model of its kind (--depth-model, --sd-model,
+ * --inpaint-model, --lama-model, --seg-model) and that --tokenizer loads: returns 0, or
+ * G3D_EXIT_FAIL after one line naming the flag and the file. */
+int g3d_cli_check_models(const g3d_generate_params *p);
+
+#endif
