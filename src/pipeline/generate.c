@@ -265,7 +265,7 @@ static g3d_status make_prompts(run *r)
         G3D_TRY(g3d_prompt_provider_describe_create(p->clip_model, NULL, caption, p->seed, &r->own_prompts));
         r->auto_prompts = &r->own_prompts;
     }
-    if (!r->auto_prompts && !p->prompt && !p->inpaint_model) return G3D_OK;
+    if (!r->auto_prompts && !p->prompt && !p->inpaint_model && !p->inpainter) return G3D_OK;
     r->run_prompts = (g3d_prompt_provider){r->auto_prompts ? r->auto_prompts->name : "neutral", r, run_prompt, NULL};
     r->prompts = &r->run_prompts;
     return G3D_OK;
