@@ -3,7 +3,6 @@
 
 #include "gen3d/clip_text.h"
 #include "gen3d/recognize.h"
-#include "sd_opts.h"
 
 #include <string.h>
 #include <sys/stat.h>
@@ -13,6 +12,7 @@ void g3d_cli_diffusion_init(g3d_cli_diffusion *d)
     g3d_sd_view_params v;
     g3d_sd_view_params_default(&v);
     memset(d, 0, sizeof *d);
+    d->parts.prediction = -1;
     d->negative = v.sd.negative;
     d->sampler = g3d_sd_sampler_name(v.sd.sampler.kind);
     d->steps = v.sd.sampler.steps;
@@ -31,7 +31,7 @@ int g3d_cli_diffusion_check(const g3d_cli_diffusion *d, int rgb, int depth_model
     if (d->sd_model && rgb) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sd-model draws the first image: no -i");
     if (d->sd_model && !depth_model)
         return g3d_cli_errorf(G3D_EXIT_USAGE, "text input needs --depth-model (MoGe-2) for the drawn image's depth and camera");
-    if (!d->sd_model && !d->inpaint_model && (d->vae || d->text_encoder || d->tokenizer || d->config))
+    if (!d->sd_model && !d->inpaint_model && (d->parts.vae || d->parts.text_encoder || d->parts.tokenizer || d->parts.yaml))
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--vae, --text-encoder, --tokenizer and --sd-config go with --sd-model or --inpaint-model");
     return 0;
 }
@@ -44,10 +44,7 @@ void g3d_cli_diffusion_apply(const g3d_cli_diffusion *d, g3d_generate_params *p)
     p->prompt = d->prompt;
     p->sd_model = d->sd_model;
     p->inpaint_model = d->inpaint_model;
-    p->sd_parts.vae = d->vae;
-    p->sd_parts.text_encoder = d->text_encoder;
-    p->sd_parts.tokenizer = d->tokenizer;
-    p->sd_parts.yaml = d->config;
+    p->sd_parts = d->parts;
     if (d->prompt && !d->sd_model && !d->inpaint_model)
         g3d_log(G3D_LOG_WARN, "the prompt is not used: without --inpaint-model the views are filled by an inpainter that "
                               "takes no text");

@@ -5,10 +5,11 @@
 
 #include "cli.h"
 #include "gen3d/generate.h"
+#include "sd_opts.h"
 
 typedef struct g3d_cli_diffusion {
     const char *prompt, *negative, *sampler, *sd_model, *inpaint_model;
-    const char *vae, *text_encoder, *tokenizer, *config;
+    g3d_sd_paths parts;          /* vae, text_encoder, tokenizer, yaml for both models */
     int steps, karras, size;
     double cfg, eta;
 } g3d_cli_diffusion;
@@ -19,15 +20,9 @@ typedef struct g3d_cli_diffusion {
     {0, "sd-model", G3D_OPT_PATH, &(d)->sd_model, "MODEL", "text input: Stable Diffusion text-to-image model drawing the first image"}, \
     {0, "inpaint-model", G3D_OPT_PATH, &(d)->inpaint_model, "MODEL", "Stable Diffusion (inpainting) model filling the new views and the background"}, \
     {0, "sd-steps", G3D_OPT_INT, &(d)->steps, "N", "denoising steps per image"},                                \
-    {0, "cfg", G3D_OPT_DOUBLE, &(d)->cfg, "S", "classifier-free guidance scale (1: none)"},                       \
-    {0, "sampler", G3D_OPT_STRING, &(d)->sampler, "NAME", "ddim, pndm, euler, euler_a or dpmpp_2m"},            \
-    {0, "karras", G3D_OPT_FLAG, &(d)->karras, NULL, "Karras sigmas (euler, euler_a, dpmpp_2m)"},                  \
-    {0, "eta", G3D_OPT_DOUBLE, &(d)->eta, "E", "DDIM's eta (0: deterministic)"},                                 \
+    G3D_SD_SAMPLING_OPTS(&(d)->cfg, &(d)->sampler, &(d)->karras, &(d)->eta),                                      \
     {0, "sd-size", G3D_OPT_INT, &(d)->size, "PX", "longer side the diffusion models draw at (their native size)"}, \
-    {0, "vae", G3D_OPT_PATH, &(d)->vae, "FILE", "the diffusion models' VAE from this file"},                     \
-    {0, "text-encoder", G3D_OPT_PATH, &(d)->text_encoder, "FILE", "the diffusion models' text encoder from this file"}, \
-    {0, "tokenizer", G3D_OPT_PATH, &(d)->tokenizer, "DIR|FILE", "CLIP vocabulary of the diffusion models (default: OpenAI's)"}, \
-    {0, "sd-config", G3D_OPT_PATH, &(d)->config, "YAML", "the diffusion models' original configuration (default: MODEL.yaml)"}
+    G3D_SD_PARTS_OPTS(&(d)->parts, "sd-config")
 
 /* The library's defaults (g3d_sd_view_params_default). */
 void g3d_cli_diffusion_init(g3d_cli_diffusion *d);

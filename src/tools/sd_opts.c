@@ -35,15 +35,9 @@ typedef struct sd_cli {
     {'p', "prompt", G3D_OPT_STRING, &(c)->prompt, "TEXT", "what to draw"},                                            \
     {'n', "negative", G3D_OPT_STRING, &(c)->negative, "TEXT", "what to avoid (the unconditional prompt)"},             \
     {0, "steps", G3D_OPT_INT, &(c)->steps, "N", "denoising steps"},                                                   \
-    {0, "cfg", G3D_OPT_DOUBLE, &(c)->cfg, "S", "classifier-free guidance scale (1: none)"},                           \
-    {0, "sampler", G3D_OPT_STRING, &(c)->sampler, "NAME", "ddim, pndm, euler, euler_a or dpmpp_2m"},                        \
-    {0, "karras", G3D_OPT_FLAG, &(c)->karras, NULL, "Karras sigmas (euler, euler_a, dpmpp_2m)"},                      \
-    {0, "eta", G3D_OPT_DOUBLE, &(c)->eta, "E", "DDIM's eta (0: deterministic)"},                                     \
+    G3D_SD_SAMPLING_OPTS(&(c)->cfg, &(c)->sampler, &(c)->karras, &(c)->eta),                                         \
     {0, "noise", G3D_OPT_STRING, &(c)->noise, "FILE.npy", "initial latent noise [1, 4, H/8, W/8] instead of the seed's"}, \
-    {0, "vae", G3D_OPT_STRING, &(c)->paths.vae, "FILE", "the VAE from this file"},                                    \
-    {0, "text-encoder", G3D_OPT_STRING, &(c)->paths.text_encoder, "FILE", "the text encoder from this file"},        \
-    {0, "tokenizer", G3D_OPT_STRING, &(c)->paths.tokenizer, "DIR|FILE", "CLIP vocabulary (default: OpenAI's)"},      \
-    {0, "config", G3D_OPT_STRING, &(c)->paths.yaml, "YAML", "the model's original configuration (default: MODEL.yaml)"}
+    G3D_SD_PARTS_OPTS(&(c)->paths, "config")
 
 static void sd_cli_init(sd_cli *c)
 {
