@@ -4,13 +4,15 @@
 #include <stdint.h>
 #include <stdio.h>
 
-static char g_description[4096];
+static char g_description[8192];
 
 static const char *description(void)
 {
     int k = snprintf(g_description, sizeof g_description,
-                     "Runs the whole pipeline on one RGB-D frame, or an RGB image with --depth-model (MoGe-2 or\n"
-                     "metric Depth Anything V2): world generation along the trajectory (as\n"
+                     "Runs the whole pipeline on one RGB-D frame, an RGB image with --depth-model (MoGe-2 or\n"
+                     "metric Depth Anything V2), or a text prompt (-p PROMPT --sd-model MODEL --depth-model\n"
+                     "MOGE2: Stable Diffusion draws the first image, MoGe-2 gives its depth and camera):\n"
+                     "world generation along the trajectory (as\n"
                      "`gen3d world`), then 3D Gaussian splatting trained on the generated views and the extra\n"
                      "views' valid pixels (as `gen3d train`), then a fly-through video. Writes one folder:\n"
                      "  scene.ply        the trained Gaussians, standard 3DGS layout (any 3DGS viewer)\n"
@@ -30,10 +32,15 @@ static const char *description(void)
                      "A summary (timings per stage, Gaussian count, training PSNR) goes to stdout.\n"
                      "--world DIR trains on a world folder written earlier (by `gen3d world`, or a dataset/)\n"
                      "instead of generating one.\n"
-                     "--clip and --caption-model write the inpainting prompts automatically (as `gen3d\n"
-                     "describe`): the background template with CLIP's scene category and the background's\n"
-                     "colours, and BLIP's caption for the views; config.json records them. The inpainters built\n"
-                     "in so far (PatchMatch, LaMa) take no text.\n\n");
+                     "--inpaint-model MODEL fills every new view and the background behind the foreground\n"
+                     "with Stable Diffusion (an inpainting checkpoint such as sd-v1-5-inpainting.ckpt; a\n"
+                     "text-to-image one inpaints by latent blending, said once), at --sd-size and back, the\n"
+                     "known pixels kept exactly; without it LaMa (--inpainter lama) or PatchMatch fill them.\n"
+                     "Prompts: -p for the views (and the text input); else --clip and --caption-model write\n"
+                     "them (as `gen3d describe`): the background template \"high-resolution [category]\n"
+                     "background with [colours] colors, photorealistic, 8K\" and BLIP's caption for the views;\n"
+                     "else neutral ones (category \"scene\", colours \"natural\"). config.json records them\n"
+                     "and every diffusion setting (docs/generate.md).\n\n");
     g3d_cli_world_help(g_description, k, (int)sizeof g_description);
     return g_description;
 }
@@ -45,7 +52,7 @@ static int run(int argc, char **argv)
     g3d_cli_generate_init(&g);
     int nopts = g3d_cli_generate_opts(&g, opts);
     const char *pos[1];
-    int npos, prc = g3d_cli_parse(argc, argv, opts, nopts, "gen3d generate [-i RGB --depth DEPTH] [options] -o DIR",
+    int npos, prc = g3d_cli_parse(argc, argv, opts, nopts, "gen3d generate [-i RGB --depth DEPTH | -p PROMPT --sd-model MODEL] [options] -o DIR",
                                   description(), pos, 0, &npos);
     if (prc) return prc < 0 ? G3D_EXIT_OK : prc;
     if ((prc = g3d_cli_generate_check(&g)) != 0) return prc;
