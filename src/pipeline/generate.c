@@ -266,7 +266,8 @@ static g3d_status make_prompts(run *r)
         r->auto_prompts = &r->own_prompts;
     }
     if (!r->auto_prompts && !p->prompt && !p->inpaint_model && !p->inpainter) return G3D_OK;
-    r->run_prompts = (g3d_prompt_provider){r->auto_prompts ? r->auto_prompts->name : "neutral", r, run_prompt, NULL};
+    const char *name = r->auto_prompts ? r->auto_prompts->name : p->prompt ? "user" : "neutral";
+    r->run_prompts = (g3d_prompt_provider){name, r, run_prompt, NULL};
     r->prompts = &r->run_prompts;
     return G3D_OK;
 }
