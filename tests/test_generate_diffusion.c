@@ -57,12 +57,42 @@ static void params(g3d_generate_params *p, const char *out)
     p->seed = 5;
 }
 
-/* Runs p with the diffusion inpainter behind a recorder; returns the world written (loaded
- * back) in *w. */
-static void run_world(g3d_generate_params *p, recorder *rec, g3d_world *w)
+/* An inpainting UNet (9 input channels: latent, mask, masked picture's latent) made from the
+ * text-to-image fixture: its first convolution widened, the extra input channels' weights
+ * repeating the first four's. Written to `path`. */
+static void make_inpainting_unet(const char *path)
 {
-    static char model[1024];
-    snprintf(model, sizeof model, "%s", test_fixture("sdpipe_unet_tiny.safetensors"));
+    g3d_ckpt *ck = NULL;
+    CHECK_OK(g3d_ckpt_open(test_fixture("sdpipe_unet_tiny.safetensors"), &ck));
+    if (!ck) return;
+    int64_t n = g3d_ckpt_count(ck);
+    g3d_tensor_out *t = calloc((size_t)n, sizeof *t);
+    uint16_t *wide = NULL;
+    for (int64_t i = 0; t && i < n; i++) {
+        const g3d_tensor_info *in = g3d_ckpt_tensor(ck, i);
+        t[i] = (g3d_tensor_out){in->name, in->dtype, in->ndim, {0}, in->data};
+        memcpy(t[i].shape, in->shape, sizeof in->shape);
+        if (strcmp(in->name, "model.diffusion_model.input_blocks.0.0.weight")) continue;
+        CHECK(in->dtype == G3D_DT_F16 && in->ndim == 4 && in->shape[1] == 4);
+        int64_t co = in->shape[0], k = in->shape[2] * in->shape[3];
+        wide = malloc(sizeof *wide * (size_t)(co * 9 * k));
+        for (int64_t o = 0; wide && o < co; o++)
+            for (int c = 0; c < 9; c++)
+                memcpy(wide + (o * 9 + c) * k, (const uint16_t *)in->data + (o * 4 + c % 4) * k, sizeof *wide * (size_t)k);
+        t[i].shape[1] = 9;
+        t[i].data = wide;
+    }
+    CHECK(wide != NULL);
+    if (t && wide) CHECK_OK(g3d_safetensors_write(path, t, (int)n, NULL));
+    free(wide);
+    free(t);
+    g3d_ckpt_free(ck);
+}
+
+/* Runs p with the diffusion inpainter of `model` behind a recorder; returns the world written
+ * (loaded back) in *w. */
+static void run_world(g3d_generate_params *p, const char *model, recorder *rec, g3d_world *w)
+{
     g3d_sd_paths sp = p->sd_parts;
     sp.model = model;
     g3d_sd *m = NULL;
@@ -117,7 +147,7 @@ TEST(text_input)
     p.depth_model = moge;
     p.prompt = g_prompt;
     p.layers = 0;
-    run_world(&p, &rec, &w);
+    run_world(&p, sd, &rec, &w);
     /* the first image: the model's own text-to-image picture at the native size */
     g3d_sd_paths sp = parts();
     sp.model = sd;
@@ -142,7 +172,9 @@ TEST(text_input)
     g3d_world_free(&w);
 }
 
-TEST(middlebury_background)
+/* The Middlebury frame (RGB-D, foreground objects in its depth) with `model` filling the
+ * background and the views. */
+static void middlebury(const char *label, const char *model)
 {
     g3d_generate_params p;
     recorder rec;
@@ -150,8 +182,8 @@ TEST(middlebury_background)
     params(&p, test_tmp("gen_diffusion_middlebury"));
     p.input.default_dir = test_default_input();
     p.input.max_side = 64;
-    run_world(&p, &rec, &w);
-    CHECK_MSG(w.layers.n_foreground > 0, "no foreground: the background fill is not exercised");
+    run_world(&p, model, &rec, &w);
+    CHECK_MSG(w.layers.n_foreground > 0, "%s: no foreground: the background fill is not exercised", label);
     char *bg = NULL;
     const char *colors = G3D_NEUTRAL_COLORS;
     bg = g3d_background_prompt(G3D_NEUTRAL_CATEGORY, &colors, 1);
@@ -172,10 +204,29 @@ TEST(middlebury_background)
             worst = fmax(worst, fabs(w.layers.bg_rgb.data[j] - rec.out[0].data[j]));
         CHECK_MSG(worst <= 0.5 / 255 + 1e-6, "the saved background is not the filled one (%g)", worst);
     }
-    check_views("Middlebury", &rec, 1, &w, G3D_NEUTRAL_VIEW_PROMPT);
+    check_views(label, &rec, 1, &w, G3D_NEUTRAL_VIEW_PROMPT);
     free(bg);
     recorder_free(&rec);
     g3d_world_free(&w);
+}
+
+TEST(middlebury_text_to_image_model)
+{
+    middlebury("Middlebury, latent blending", test_fixture("sdpipe_unet_tiny.safetensors"));
+}
+
+TEST(middlebury_inpainting_model)
+{
+    static char path[1024];
+    snprintf(path, sizeof path, "%s", test_tmp("sd_inpainting_tiny.safetensors"));
+    make_inpainting_unet(path);
+    g3d_sd_paths sp = parts();
+    g3d_sd *m = NULL;
+    sp.model = path;
+    CHECK_OK(g3d_sd_load(&sp, &m));
+    CHECK(m && g3d_sd_get_unet(m)->in_ch == 9);
+    g3d_sd_free(m);
+    middlebury("Middlebury, inpainting model", path);
 }
 
 int main(int argc, char **argv)
@@ -184,6 +235,7 @@ int main(int argc, char **argv)
     g3d_process_setup(argv);   /* passive OpenMP waits: the machine may be shared */
     RUN(geometry);
     RUN(text_input);
-    RUN(middlebury_background);
+    RUN(middlebury_text_to_image_model);
+    RUN(middlebury_inpainting_model);
     return test_summary();
 }
