@@ -10,27 +10,27 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
-static double cpu_seconds(void)
+static inline double cpu_seconds(void)
 {
     struct rusage r;
     getrusage(RUSAGE_SELF, &r);
     return (double)r.ru_utime.tv_sec + r.ru_stime.tv_sec + 1e-6 * ((double)r.ru_utime.tv_usec + r.ru_stime.tv_usec);
 }
 
-static int cmp_double(const void *a, const void *b)
+static inline int cmp_double(const void *a, const void *b)
 {
     double x = *(const double *)a, y = *(const double *)b;
     return (x > y) - (x < y);
 }
 
-static double median(double *v, int n)
+static inline double median(double *v, int n)
 {
     qsort(v, (size_t)n, sizeof *v, cmp_double);
     return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
 /* The twin as a child process: its stdin and stdout are ours to write and read. */
-static pid_t spawn(char *const argv[], FILE **to, FILE **from)
+static inline pid_t spawn(char *const argv[], FILE **to, FILE **from)
 {
     int in[2], out[2];
     if (pipe(in) || pipe(out)) return -1;
@@ -52,7 +52,7 @@ static pid_t spawn(char *const argv[], FILE **to, FILE **from)
 
 /* Starts argv (NULL-ended, argv[0] a path) as a twin and waits for its "ready". Returns 0, or 1
  * after saying why. */
-static int twin_spawn(char *const argv[], FILE **to, FILE **from, pid_t *pid)
+static inline int twin_spawn(char *const argv[], FILE **to, FILE **from, pid_t *pid)
 {
     *pid = spawn(argv, to, from);
     char line[256] = "";
@@ -96,7 +96,7 @@ static inline double load_average(void)
 }
 
 /* One forward of the twin: its wall and CPU seconds; 0 on success. */
-static int twin_round(FILE *to, FILE *from, double *wall, double *cpu)
+static inline int twin_round(FILE *to, FILE *from, double *wall, double *cpu)
 {
     char line[256];
     fprintf(to, "go\n");
