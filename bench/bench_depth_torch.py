@@ -1,15 +1,18 @@
-# PyTorch timing baseline for bench_depth.c: a Depth Anything V2 ViT-S of the same layer
-# structure (DINOv2 ViT-S/14 + DPT head, random weights: the cost does not depend on values),
-# one 518x518 forward with the given thread count. Prints "torch_seconds <best of reps>".
-#   /usr/bin/python3 bench/bench_depth_torch.py [size=518] [threads=2] [reps=2]
-import sys, time
+# PyTorch twin of bench_depth.c: a Depth Anything V2 ViT-S of the same layer structure
+# (DINOv2 ViT-S/14 + DPT head, random weights: the cost does not depend on values), timed one
+# forward per request so that the two programs alternate.
+#   /usr/bin/python3 bench/bench_depth_torch.py [size=518] [threads=2]
+# Prints "ready" once built; then for every line read from stdin runs one size x size forward
+# and prints "torch_seconds <wall s> <CPU s of all threads>".
+import sys
+import time
+
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
 size = int(sys.argv[1]) if len(sys.argv) > 1 else 518
 threads = int(sys.argv[2]) if len(sys.argv) > 2 else 2
-reps = int(sys.argv[3]) if len(sys.argv) > 3 else 2
 torch.set_num_threads(threads)
 D, HEADS, DEPTH, FEAT = 384, 6, 12, 64
 OC = [48, 96, 192, 384]
@@ -95,10 +98,9 @@ class Model(nn.Module):
 
 model = Model().eval()
 img = torch.randn(1, 3, size, size)
-best = 1e30
+print("ready", flush=True)
 with torch.no_grad():
-    for _ in range(reps):
-        t0 = time.time()
+    for line in sys.stdin:
+        t0, c0 = time.time(), time.process_time()
         model(img)
-        best = min(best, time.time() - t0)
-print("torch_seconds %.4f" % best)
+        print("torch_seconds %.4f %.4f" % (time.time() - t0, time.process_time() - c0), flush=True)

@@ -61,6 +61,7 @@ int main(int argc, char **argv)
     }
     if (rounds < 1 || rounds > 100) return 2;
     double wall_ratio[100], cpu_ratio[100], sum_c = 0, sum_t = 0;
+    const double load0 = load_average();
     for (int k = 0; k < rounds; k++) {
         t0 = g3d_time_now();
         const double c0 = cpu_seconds();
@@ -75,9 +76,10 @@ int main(int argc, char **argv)
         sum_c += tc;
         sum_t += tt;
     }
-    printf("big-lama %dx%d, %d threads, %d rounds: gen3d %.3f s, PyTorch %.3f s per forward (means); gen3d is %.2fx "
-           "faster (median of the rounds; CPU time %.2fx)\n", size, size, threads, rounds, sum_c / rounds, sum_t / rounds,
-           median(wall_ratio, rounds), median(cpu_ratio, rounds));
+    const double load1 = load_average();
+    printf("big-lama %dx%d, %d threads, %d rounds, load average %.1f -> %.1f: gen3d %.3f s, PyTorch %.3f s per forward "
+           "(means); gen3d is %.2fx faster (median of the rounds; CPU time %.2fx)\n", size, size, threads, rounds, load0,
+           load1, sum_c / rounds, sum_t / rounds, median(wall_ratio, rounds), median(cpu_ratio, rounds));
     fclose(to);
     fclose(from);
     waitpid(py, NULL, 0);

@@ -5,7 +5,8 @@
  * just before it, because a shared machine's speed drifts within seconds.
  *   cmake --build build --target bench && ./build/bench_nn [filter] [--reps N]
  * `filter` keeps the cases whose name contains it. Work counts are multiply-adds x 2 of the
- * operator's definition (also for Winograd, which does fewer). */
+ * operator's definition (also for Winograd, which does fewer). A last table sums up per op
+ * kind (linear, attention, conv3, conv3w, conv1, convT, ...): the median and lowest fraction. */
 #include "gen3d/nn.h"
 
 #include <cblas.h>
@@ -18,6 +19,27 @@
 static int g_reps = 5, g_threads;
 static const char *g_filter;
 static float *g_a, *g_b, *g_c;
+
+/* Per op kind (the first word of a case's name): the cases' fractions of sgemm, for the summary. */
+#define MAX_KINDS 16
+static struct {
+    char name[16];
+    int n;
+    double frac[64];
+} g_kinds[MAX_KINDS];
+static int g_nkinds;
+static double g_sgemm_lo = 1e30, g_sgemm_hi;
+
+static void note_kind(const char *name, double frac)
+{
+    char k[16];
+    snprintf(k, sizeof k, "%.*s", (int)strcspn(name, " "), name);
+    int i = 0;
+    while (i < g_nkinds && strcmp(g_kinds[i].name, k)) i++;
+    if (i == MAX_KINDS) return;
+    if (i == g_nkinds) snprintf(g_kinds[g_nkinds++].name, sizeof g_kinds[i].name, "%s", k);
+    if (g_kinds[i].n < 64) g_kinds[i].frac[g_kinds[i].n++] = frac;
+}
 
 static float *rnd(size_t n, float scale)
 {
@@ -60,6 +82,8 @@ static void run(const char *name, const char *shape, double flops, case_fn fn, v
     int reps = g_reps < 64 ? g_reps : 64;
     for (int r = 0; r < reps; r++) {
         double base = sgemm_rate();
+        g_sgemm_lo = base < g_sgemm_lo ? base : g_sgemm_lo;
+        g_sgemm_hi = base > g_sgemm_hi ? base : g_sgemm_hi;
         t0 = g3d_time_now();
         for (int i = 0; i < inner; i++) fn(ctx);
         t[r] = (g3d_time_now() - t0) / inner;
@@ -68,6 +92,7 @@ static void run(const char *name, const char *shape, double flops, case_fn fn, v
     qsort(t, reps, sizeof *t, cmp_double);
     qsort(ratio, reps, sizeof *ratio, cmp_double);
     double tm = t[reps / 2], rm = ratio[reps / 2];
+    if (flops > 0) note_kind(name, rm);
     if (flops > 0)
         printf("| %-26s | %-36s | %8.2f | %9.2f | %7.1f | %5.0f %% |\n", name, shape, flops * 1e-9, tm * 1e3,
                flops / tm * 1e-9, 100.0 * rm);
@@ -244,6 +269,7 @@ int main(int argc, char **argv)
            "----------", "-----------", "---------", "---------");
 
     lin("linear dinov2-s qkv", 1370, 384, 1152, G3D_ACT_NONE, 0, G3D_DT_F32, 0);
+    lin("linear dinov2-s proj", 1370, 384, 384, G3D_ACT_NONE, 1, G3D_DT_F32, 0);
     lin("linear dinov2-s fc1", 1370, 384, 1536, G3D_ACT_GELU, 0, G3D_DT_F32, 0);
     lin("linear dinov2-s fc2", 1370, 1536, 384, G3D_ACT_NONE, 1, G3D_DT_F32, 0);
     lin("linear dinov2-s fc1 legacy", 1370, 384, 1536, G3D_ACT_NONE, 0, G3D_DT_F32, 1);
@@ -290,6 +316,8 @@ int main(int argc, char **argv)
     }
     conv("conv1 sd proj 320", 320, 320, 1, 1, 0, 64, 64, 1, G3D_PAD_ZEROS, 0, 0, 0);
     conv("conv1 lama fu 384", 384, 384, 1, 1, 0, 64, 33, 1, G3D_PAD_ZEROS, 0, 0, 0);
+    conv("conv1 lama st 384->192", 384, 192, 1, 1, 0, 64, 64, 1, G3D_PAD_ZEROS, 0, 0, 0);
+    conv("conv1 dpt-s 64 @296", 64, 64, 1, 1, 0, 296, 296, 1, G3D_PAD_ZEROS, 0, 0, 0);
     conv("conv dw3 tinyvit 256", 256, 256, 3, 1, 1, 256, 256, 256, G3D_PAD_ZEROS, 0, 0, 0);
     conv("convT lama k3s2 512->256", 512, 256, 3, 2, 1, 64, 64, 1, G3D_PAD_ZEROS, 1, 1, 1);
     conv("convT sam k2s2 256->64", 256, 64, 2, 2, 0, 64, 64, 1, G3D_PAD_ZEROS, 1, 0, 1);
@@ -300,6 +328,17 @@ int main(int argc, char **argv)
     misc("gelu sam-b mlp", "4096 x 3072", 4, 3072, 4096, 1);
     misc("rfft2 lama", "192 x 64x64", 2, 192, 64, 64);
     misc("irfft2 lama", "192 x 64x64", 3, 192, 64, 64);
+    /* per kind: how many shapes, their median fraction of sgemm and the lowest; 3x3 "conv3w"
+     * (Winograd) counts the direct convolution's multiply-adds, so it can exceed 100 % */
+    printf("\nper op kind (sgemm %.0f-%.0f GFLOP/s during the run):\n", g_sgemm_lo, g_sgemm_hi);
+    printf("| %-10s | %6s | %14s | %10s |\n", "kind", "shapes", "median sgemm", "lowest");
+    printf("|------------|--------|----------------|------------|\n");
+    for (int i = 0; i < g_nkinds; i++) {
+        qsort(g_kinds[i].frac, g_kinds[i].n, sizeof(double), cmp_double);
+        const int n = g_kinds[i].n;
+        const double med = n % 2 ? g_kinds[i].frac[n / 2] : 0.5 * (g_kinds[i].frac[n / 2 - 1] + g_kinds[i].frac[n / 2]);
+        printf("| %-10s | %6d | %12.0f %% | %8.0f %% |\n", g_kinds[i].name, n, 100.0 * med, 100.0 * g_kinds[i].frac[0]);
+    }
     free(g_a), free(g_b), free(g_c);
     return 0;
 }

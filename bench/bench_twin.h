@@ -1,5 +1,6 @@
 /* bench_twin.h - helpers of the benchmarks that race a PyTorch twin process (bench_lama.c,
- * bench_sam.c): CPU time, the median of the rounds, starting the twin with pipes. */
+ * bench_sam.c, bench_depth.c): CPU time, the median of the rounds, starting the twin with pipes,
+ * the load average. */
 #ifndef G3D_BENCH_TWIN_H
 #define G3D_BENCH_TWIN_H
 
@@ -9,27 +10,27 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
-static double cpu_seconds(void)
+static inline double cpu_seconds(void)
 {
     struct rusage r;
     getrusage(RUSAGE_SELF, &r);
     return (double)r.ru_utime.tv_sec + r.ru_stime.tv_sec + 1e-6 * ((double)r.ru_utime.tv_usec + r.ru_stime.tv_usec);
 }
 
-static int cmp_double(const void *a, const void *b)
+static inline int cmp_double(const void *a, const void *b)
 {
     double x = *(const double *)a, y = *(const double *)b;
     return (x > y) - (x < y);
 }
 
-static double median(double *v, int n)
+static inline double median(double *v, int n)
 {
     qsort(v, (size_t)n, sizeof *v, cmp_double);
     return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
 /* The twin as a child process: its stdin and stdout are ours to write and read. */
-static pid_t spawn(char *const argv[], FILE **to, FILE **from)
+static inline pid_t spawn(char *const argv[], FILE **to, FILE **from)
 {
     int in[2], out[2];
     if (pipe(in) || pipe(out)) return -1;
@@ -49,10 +50,24 @@ static pid_t spawn(char *const argv[], FILE **to, FILE **from)
     return pid;
 }
 
+/* Starts argv (NULL-ended, argv[0] a path) as a twin and waits for its "ready". Returns 0, or 1
+ * after saying why. */
+static inline int twin_spawn(char *const argv[], FILE **to, FILE **from, pid_t *pid)
+{
+    *pid = spawn(argv, to, from);
+    char line[256] = "";
+    if (*pid < 0 || !*to || !*from || !fgets(line, sizeof line, *from) || strncmp(line, "ready", 5)) {
+        fprintf(stderr, "the PyTorch twin %s did not start (/usr/bin/python3 with torch is needed, and the official "
+                        "checkout where the twin imports it)\n", argv[1]);
+        return 1;
+    }
+    return 0;
+}
+
 /* Starts the twin `/usr/bin/python3 SCRIPT CHECKOUT SAVE ARGS...` (args: up to 4, NULL-ended)
  * with SAVE a fresh temporary file (its name into save[32]) that the twin fills with its weights,
  * and waits for its "ready". Returns 0, or 1 after saying why (save removed). */
-static int twin_start(const char *script, const char *checkout, const char *const *args, char save[32], FILE **to,
+static inline int twin_start(const char *script, const char *checkout, const char *const *args, char save[32], FILE **to,
                       FILE **from, pid_t *pid)
 {
     snprintf(save, 32, "/tmp/bench_twin_XXXXXX");
@@ -61,19 +76,27 @@ static int twin_start(const char *script, const char *checkout, const char *cons
     close(fd);
     char *argv[9] = {"/usr/bin/python3", (char *)script, (char *)checkout, save};
     for (int i = 0; i < 4 && args && args[i]; i++) argv[4 + i] = (char *)args[i];
-    *pid = spawn(argv, to, from);
-    char line[256] = "";
-    if (*pid < 0 || !*to || !*from || !fgets(line, sizeof line, *from) || strncmp(line, "ready", 5)) {
-        fprintf(stderr, "the PyTorch twin %s did not start (the official checkout and /usr/bin/python3 with torch "
-                        "are needed)\n", script);
+    if (twin_spawn(argv, to, from, pid)) {
         unlink(save);
         return 1;
     }
     return 0;
 }
 
+/* The 1-minute load average of the machine (what else ran during a measurement). */
+static inline double load_average(void)
+{
+    double l = -1;
+    FILE *f = fopen("/proc/loadavg", "r");
+    if (f) {
+        if (fscanf(f, "%lf", &l) != 1) l = -1;
+        fclose(f);
+    }
+    return l;
+}
+
 /* One forward of the twin: its wall and CPU seconds; 0 on success. */
-static int twin_round(FILE *to, FILE *from, double *wall, double *cpu)
+static inline int twin_round(FILE *to, FILE *from, double *wall, double *cpu)
 {
     char line[256];
     fprintf(to, "go\n");

@@ -7,6 +7,8 @@
 #include "gen3d/depth_anything.h"
 #include "gen3d/recognize.h"
 
+#include <omp.h>
+
 #define GOLDEN "golden/depth_anything_v2_vits/"
 
 /* The architecture a golden was made with, as the checks expect the loader to read it. */
@@ -126,6 +128,32 @@ TEST(golden_vits)
     golden_arch a = {.input_size = 196, .net_w = 294, .net_h = 196, .width = 384, .features = 64,
                      .nblocks = 5, .blocks = {0, 2, 5, 8, 11}};
     check_golden(test_shared(GOLDEN "weights.safetensors"), test_shared(GOLDEN "activations.safetensors"), &a);
+}
+
+/* The prediction is the same, bit for bit, with 1, 2 and 3 threads (the products, Winograd
+ * convolutions and attention give every output one fixed order of operations). */
+TEST(same_result_for_any_thread_count)
+{
+    g3d_dav2 *m = NULL;
+    CHECK_OK(g3d_dav2_load_file(test_fixture("dav2_tiny.pth"), &m));
+    if (!m) return;
+    const int w = 75, h = 61;
+    float *rgb = malloc(sizeof(float) * 3 * w * h), *d[3] = {0};
+    g3d_rng r;
+    g3d_rng_seed(&r, 5, 1);
+    for (int i = 0; i < 3 * w * h; i++) rgb[i] = g3d_rng_float(&r);
+    const int saved = omp_get_max_threads();
+    for (int t = 0; t < 3; t++) {
+        d[t] = malloc(sizeof(float) * w * h);
+        omp_set_num_threads(t + 1);
+        CHECK_OK(g3d_dav2_predict(m, rgb, w, h, 112, d[t], NULL));
+    }
+    omp_set_num_threads(saved);
+    CHECK(memcmp(d[0], d[1], sizeof(float) * w * h) == 0);
+    CHECK(memcmp(d[0], d[2], sizeof(float) * w * h) == 0);
+    for (int t = 0; t < 3; t++) free(d[t]);
+    free(rgb);
+    g3d_dav2_free(m);
 }
 
 TEST(metric_defaults_from_names)
@@ -307,6 +335,7 @@ int main(int argc, char **argv)
     RUN(wrong_checkpoint_refused);
     RUN(missing_tensor_named);
     RUN(golden_tiny);
+    RUN(same_result_for_any_thread_count);
     RUN(architecture_from_shapes);
     return test_summary();
 }

@@ -11,9 +11,11 @@
 
 #define PATCH 14
 
+/* A convolution of the head: its float32 weights (owned) described for the layer library, with
+ * the 3x3 ones (Winograd) and the transposed ones (phase kernels) prepared at load. */
 typedef struct conv {
     float *w, *b;   /* b may be NULL */
-    int cin, cout, k;
+    g3d_nn_conv c;
 } conv;
 
 typedef struct fusion {
@@ -28,22 +30,28 @@ struct g3d_dav2 {
     float max_depth;   /* > 0: a metric model, output = max_depth * sigmoid(head) in metres */
 };
 
-static g3d_status load_conv(const g3d_ckpt *ck, const char *name, int cout, int cin, int k, int bias, conv *c)
+/* Loads NAME.weight [cout, cin, k, k] (and NAME.bias) as a Conv2d with padding k / 2, or with
+ * transposed set as a ConvTranspose2d of stride k (its weight [cin, cout, k, k]; square in the
+ * head, so the same shape check fits). */
+static g3d_status load_conv(const g3d_ckpt *ck, const char *name, int cout, int cin, int k, int stride, int transposed,
+                            int bias, conv *c)
 {
     char buf[256];
     const int64_t ws[] = {cout, cin, k, k}, bs[] = {cout};
-    c->cin = cin;
-    c->cout = cout;
-    c->k = k;
     snprintf(buf, sizeof buf, "%s.weight", name);
     G3D_TRY(g3d_ckpt_read_alloc(ck, buf, 4, ws, &c->w));
-    if (!bias) return G3D_OK;
-    snprintf(buf, sizeof buf, "%s.bias", name);
-    return g3d_ckpt_read_alloc(ck, buf, 1, bs, &c->b);
+    if (bias) {
+        snprintf(buf, sizeof buf, "%s.bias", name);
+        G3D_TRY(g3d_ckpt_read_alloc(ck, buf, 1, bs, &c->b));
+    }
+    c->c = g3d_nn_conv_make(cin, cout, k, stride, transposed ? 0 : k / 2, c->w, c->b);
+    c->c.transposed = transposed;
+    return g3d_nn_conv_prepare(&c->c);
 }
 
 static void free_conv(conv *c)
 {
+    g3d_nn_conv_release(&c->c);
     free(c->w);
     free(c->b);
 }
@@ -71,15 +79,14 @@ static g3d_status load_head(const g3d_ckpt *ck, g3d_dav2 *m)
     int D = m->dim, F = m->feat;
     for (int i = 0; i < 4; i++) {
         snprintf(name, sizeof name, "depth_head.projects.%d", i);
-        G3D_TRY(load_conv(ck, name, m->oc[i], D, 1, 1, &m->project[i]));
+        G3D_TRY(load_conv(ck, name, m->oc[i], D, 1, 1, 0, 1, &m->project[i]));
     }
-    /* ConvTranspose weights are [C_in, C_out, k, k]; square here, so the conv shape check fits. */
-    G3D_TRY(load_conv(ck, "depth_head.resize_layers.0", m->oc[0], m->oc[0], 4, 1, &m->resize[0]));
-    G3D_TRY(load_conv(ck, "depth_head.resize_layers.1", m->oc[1], m->oc[1], 2, 1, &m->resize[1]));
-    G3D_TRY(load_conv(ck, "depth_head.resize_layers.3", m->oc[3], m->oc[3], 3, 1, &m->resize[3]));
+    G3D_TRY(load_conv(ck, "depth_head.resize_layers.0", m->oc[0], m->oc[0], 4, 4, 1, 1, &m->resize[0]));
+    G3D_TRY(load_conv(ck, "depth_head.resize_layers.1", m->oc[1], m->oc[1], 2, 2, 1, 1, &m->resize[1]));
+    G3D_TRY(load_conv(ck, "depth_head.resize_layers.3", m->oc[3], m->oc[3], 3, 2, 0, 1, &m->resize[3]));
     for (int i = 0; i < 4; i++) {
         snprintf(name, sizeof name, "depth_head.scratch.layer%d_rn", i + 1);
-        G3D_TRY(load_conv(ck, name, F, m->oc[i], 3, 0, &m->rn[i]));
+        G3D_TRY(load_conv(ck, name, F, m->oc[i], 3, 1, 0, 0, &m->rn[i]));
         static const char *parts[] = {"resConfUnit1.conv1", "resConfUnit1.conv2", "resConfUnit2.conv1",
                                       "resConfUnit2.conv2", "out_conv"};
         fusion *f = &m->refine[i];
@@ -87,12 +94,12 @@ static g3d_status load_head(const g3d_ckpt *ck, g3d_dav2 *m)
         /* refinenet4 has no skip input, so its first residual unit is never used. */
         for (int j = i == 3 ? 2 : 0; j < 5; j++) {
             snprintf(name, sizeof name, "depth_head.scratch.refinenet%d.%s", i + 1, parts[j]);
-            G3D_TRY(load_conv(ck, name, F, F, j == 4 ? 1 : 3, 1, dst[j]));
+            G3D_TRY(load_conv(ck, name, F, F, j == 4 ? 1 : 3, 1, 0, 1, dst[j]));
         }
     }
-    G3D_TRY(load_conv(ck, "depth_head.scratch.output_conv1", F / 2, F, 3, 1, &m->out1));
-    G3D_TRY(load_conv(ck, "depth_head.scratch.output_conv2.0", m->hidden2, F / 2, 3, 1, &m->out2a));
-    return load_conv(ck, "depth_head.scratch.output_conv2.2", 1, m->hidden2, 1, 1, &m->out2b);
+    G3D_TRY(load_conv(ck, "depth_head.scratch.output_conv1", F / 2, F, 3, 1, 0, 1, &m->out1));
+    G3D_TRY(load_conv(ck, "depth_head.scratch.output_conv2.0", m->hidden2, F / 2, 3, 1, 0, 1, &m->out2a));
+    return load_conv(ck, "depth_head.scratch.output_conv2.2", 1, m->hidden2, 1, 1, 0, 1, &m->out2b);
 }
 
 g3d_status g3d_dav2_load(const g3d_ckpt *ck, g3d_dav2 **out)
@@ -229,23 +236,22 @@ static g3d_status resize_planes(const float *src, int c, int sh, int sw, float *
 
 static float *alloc_f(size_t n) { return malloc(sizeof(float) * (n ? n : 1)); }
 
-static g3d_status run_conv(const conv *c, const float *x, int h, int w, int stride, float *y)
+static g3d_status run_conv(const conv *c, const float *x, int h, int w, float *y, const g3d_nn_epi *epi)
 {
-    return g3d_nn_conv2d(x, c->cin, h, w, c->w, c->b, c->cout, c->k, stride, c->k / 2, y);
+    return g3d_nn_conv_forward(&c->c, x, h, w, y, epi);
 }
 
-/* x + conv2(relu(conv1(relu(x)))) into y; tmp holds 2 * F*h*w floats. */
-static g3d_status residual_unit(const conv *c1, const conv *c2, const float *x, int h, int w, float *tmp, float *y)
+/* res + conv2(relu(conv1(relu(x)))) into y (res may be y itself); tmp holds 2 * F*h*w floats. */
+static g3d_status residual_unit(const conv *c1, const conv *c2, const float *x, const float *res, int h, int w,
+                                float *tmp, float *y)
 {
-    size_t n = (size_t)c1->cin * h * w;
+    size_t n = (size_t)c1->c.cin * h * w;
     float *a = tmp, *b = tmp + n;
     memcpy(a, x, sizeof(float) * n);
     g3d_nn_relu(a, n);
-    G3D_TRY(run_conv(c1, a, h, w, 1, b));
-    g3d_nn_relu(b, n);
-    G3D_TRY(run_conv(c2, b, h, w, 1, y));
-    g3d_nn_add(y, x, n);
-    return G3D_OK;
+    const g3d_nn_epi relu = {.act = G3D_ACT_RELU}, add = {.res = res};
+    G3D_TRY(run_conv(c1, a, h, w, b, &relu));
+    return run_conv(c2, b, h, w, y, &add);
 }
 
 /* One RefineNet block: (path + rcu1(skip)) -> rcu2 -> bilinear to (oh, ow) -> 1x1 out_conv.
@@ -253,21 +259,22 @@ static g3d_status residual_unit(const conv *c1, const conv *c2, const float *x, 
 static g3d_status fuse(const fusion *f, const float *path, const float *skip, int h, int w, int oh, int ow,
                        float **out)
 {
-    int F = f->out.cin;
+    int F = f->out.c.cin;
     size_t n = (size_t)F * h * w;
     float *tmp = alloc_f(2 * n), *acc = alloc_f(n), *r = alloc_f(n), *up = alloc_f((size_t)F * oh * ow);
     float *res = alloc_f((size_t)F * oh * ow);
     g3d_status rc = tmp && acc && r && up && res ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
     if (rc == G3D_OK) {
+        /* acc = path + (skip + rcu1's product), the second sum in the product's epilogue */
         memcpy(acc, path, sizeof(float) * n);
         if (skip) {
-            rc = residual_unit(&f->rcu1a, &f->rcu1b, skip, h, w, tmp, r);
-            if (rc == G3D_OK) g3d_nn_add(acc, r, n);
+            g3d_nn_add(acc, skip, n);
+            rc = residual_unit(&f->rcu1a, &f->rcu1b, skip, acc, h, w, tmp, acc);
         }
     }
-    if (rc == G3D_OK) rc = residual_unit(&f->rcu2a, &f->rcu2b, acc, h, w, tmp, r);
+    if (rc == G3D_OK) rc = residual_unit(&f->rcu2a, &f->rcu2b, acc, acc, h, w, tmp, r);
     if (rc == G3D_OK) rc = resize_planes(r, F, h, w, up, oh, ow);
-    if (rc == G3D_OK) rc = run_conv(&f->out, up, oh, ow, 1, res);
+    if (rc == G3D_OK) rc = run_conv(&f->out, up, oh, ow, res, NULL);
     free(tmp); free(acc); free(r); free(up);
     if (rc != G3D_OK) {
         free(res);
@@ -294,13 +301,12 @@ static g3d_status head(const g3d_dav2 *m, float *const *feats, int h, int w, flo
         rs = alloc_f((size_t)oc * lh[i] * lw[i]);
         rn[i] = alloc_f((size_t)F * lh[i] * lw[i]);
         if (!proj || !rs || !rn[i]) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
-        if (rc == G3D_OK) rc = run_conv(&m->project[i], tok, h, w, 1, proj);
+        if (rc == G3D_OK) rc = run_conv(&m->project[i], tok, h, w, proj, NULL);
         if (rc == G3D_OK) {
-            if (i < 2) rc = g3d_nn_conv_transpose2d(proj, oc, h, w, m->resize[i].w, m->resize[i].b, oc, m->resize[i].k, rs);
-            else if (i == 2) memcpy(rs, proj, sizeof(float) * (size_t)oc * np);
-            else rc = run_conv(&m->resize[3], proj, h, w, 2, rs);
+            if (i == 2) memcpy(rs, proj, sizeof(float) * (size_t)oc * np);
+            else rc = run_conv(&m->resize[i], proj, h, w, rs, NULL);
         }
-        if (rc == G3D_OK) rc = run_conv(&m->rn[i], rs, lh[i], lw[i], 1, rn[i]);
+        if (rc == G3D_OK) rc = run_conv(&m->rn[i], rs, lh[i], lw[i], rn[i], NULL);
         free(proj);
         free(rs);
         proj = rs = NULL;
@@ -318,18 +324,13 @@ static g3d_status head(const g3d_dav2 *m, float *const *feats, int h, int w, flo
         o2 = alloc_f((size_t)m->hidden2 * H * W);
         if (!o1 || !o1up || !o2) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
     }
-    if (rc == G3D_OK) rc = run_conv(&m->out1, path[0], ph, pw, 1, o1);
+    const g3d_nn_epi relu = {.act = G3D_ACT_RELU};
+    if (rc == G3D_OK) rc = run_conv(&m->out1, path[0], ph, pw, o1, NULL);
     if (rc == G3D_OK) rc = resize_planes(o1, F / 2, ph, pw, o1up, H, W);
-    if (rc == G3D_OK) rc = run_conv(&m->out2a, o1up, H, W, 1, o2);
-    if (rc == G3D_OK) {
-        g3d_nn_relu(o2, (size_t)m->hidden2 * H * W);
-        rc = run_conv(&m->out2b, o2, H, W, 1, depth);
-    }
-    if (rc == G3D_OK && m->max_depth > 0) {
+    if (rc == G3D_OK) rc = run_conv(&m->out2a, o1up, H, W, o2, &relu);
+    if (rc == G3D_OK) rc = run_conv(&m->out2b, o2, H, W, depth, m->max_depth > 0 ? NULL : &relu);
+    if (rc == G3D_OK && m->max_depth > 0)
         for (size_t i = 0; i < (size_t)H * W; i++) depth[i] = m->max_depth / (1.0f + expf(-depth[i]));
-    } else if (rc == G3D_OK) {
-        g3d_nn_relu(depth, (size_t)H * W);
-    }
     if (rc == G3D_OK && trace && trace->want) {
         int hs[4] = {ph, 4 * h, 2 * h, h}, ws[4] = {pw, 4 * w, 2 * w, w};
         for (int i = 0; i < 4; i++) {

@@ -17,14 +17,17 @@
  * dodge a floating-point rounding problem in the output size; the scale it yields is used. */
 #define POS_OFFSET 0.1
 
+/* Linear layers are packed once at load (g3d_nn_lin); the float copies read from the
+ * checkpoint are freed after packing. */
 typedef struct dino_block {
-    float *n1w, *n1b, *qkvw, *qkvb, *projw, *projb, *ls1;
-    float *n2w, *n2b, *fc1w, *fc1b, *fc2w, *fc2b, *ls2;
+    float *n1w, *n1b, *ls1, *n2w, *n2b, *ls2;
+    g3d_nn_lin qkv, proj, fc1, fc2;
 } dino_block;
 
 struct g3d_dinov2 {
     int dim, depth, hidden, grid, patch; /* grid: side of the trained position grid */
-    float *cls, *pos, *pew, *peb, *normw, *normb;
+    float *cls, *pos, *normw, *normb;
+    g3d_nn_lin pe; /* the patch embedding as a product over flattened patches */
     dino_block *blocks;
 };
 
@@ -44,6 +47,27 @@ static g3d_status load(const loader *l, float **dst, int ndim, const int64_t *sh
     return g3d_ckpt_read_alloc(l->ck, full, ndim, shape, dst);
 }
 
+/* Packs the Linear layer NAME.weight (of shape wshape, [out, ...] flattening to [out, in]) with
+ * NAME.bias [out]. */
+static g3d_status load_lin(const loader *l, g3d_nn_lin *L, int wdims, const int64_t *wshape, const char *fmt, int i)
+{
+    char name[192], wn[256], bn[256];
+    snprintf(name, sizeof name, fmt, i);
+    snprintf(wn, sizeof wn, "%s.weight", name);
+    snprintf(bn, sizeof bn, "%s.bias", name);
+    const int out = (int)wshape[0];
+    int64_t in = 1;
+    for (int d = 1; d < wdims; d++) in *= wshape[d];
+    const int64_t bshape[] = {out};
+    float *w = NULL, *b = NULL;
+    g3d_status rc = load(l, &w, wdims, wshape, "%s", wn);
+    if (rc == G3D_OK) rc = load(l, &b, 1, bshape, "%s", bn);
+    if (rc == G3D_OK) rc = g3d_nn_lin_init(L, w, G3D_DT_F32, b, out, (int)in, G3D_DT_F32);
+    free(w);
+    free(b);
+    return rc;
+}
+
 static const g3d_tensor_info *find(const loader *l, const char *name)
 {
     char full[512];
@@ -54,12 +78,13 @@ static const g3d_tensor_info *find(const loader *l, const char *name)
 void g3d_dinov2_free(g3d_dinov2 *m)
 {
     if (!m) return;
-    free(m->cls); free(m->pos); free(m->pew); free(m->peb); free(m->normw); free(m->normb);
+    free(m->cls); free(m->pos); free(m->normw); free(m->normb);
+    g3d_nn_lin_free(&m->pe);
     if (m->blocks) {
         for (int i = 0; i < m->depth; i++) {
             dino_block *b = &m->blocks[i];
-            free(b->n1w); free(b->n1b); free(b->qkvw); free(b->qkvb); free(b->projw); free(b->projb); free(b->ls1);
-            free(b->n2w); free(b->n2b); free(b->fc1w); free(b->fc1b); free(b->fc2w); free(b->fc2b); free(b->ls2);
+            free(b->n1w); free(b->n1b); free(b->ls1); free(b->n2w); free(b->n2b); free(b->ls2);
+            g3d_nn_lin_free(&b->qkv); g3d_nn_lin_free(&b->proj); g3d_nn_lin_free(&b->fc1); g3d_nn_lin_free(&b->fc2);
         }
         free(m->blocks);
     }
@@ -109,27 +134,25 @@ g3d_status g3d_dinov2_load(const g3d_ckpt *ck, const char *prefix, g3d_dinov2 **
     m->blocks = calloc((size_t)(depth ? depth : 1), sizeof *m->blocks);
     g3d_status rc = m->blocks ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
     const int64_t d1[] = {D}, cls[] = {1, 1, D}, pos[] = {1, npos + 1, D}, pew[] = {D, 3, m->patch, m->patch};
-    const int64_t qkvw[] = {3 * D, D}, qkvb[] = {3 * D}, projw[] = {D, D}, fc1w[] = {m->hidden, D},
-                  fc1b[] = {m->hidden}, fc2w[] = {D, m->hidden};
+    const int64_t qkvw[] = {3 * D, D}, projw[] = {D, D}, fc1w[] = {m->hidden, D}, fc2w[] = {D, m->hidden};
     if (rc == G3D_OK) rc = load(&l, &m->cls, 3, cls, "cls_token");
     if (rc == G3D_OK) rc = load(&l, &m->pos, 3, pos, "pos_embed");
-    if (rc == G3D_OK) rc = load(&l, &m->pew, 4, pew, "patch_embed.proj.weight");
-    if (rc == G3D_OK) rc = load(&l, &m->peb, 1, d1, "patch_embed.proj.bias");
+    if (rc == G3D_OK) rc = load_lin(&l, &m->pe, 4, pew, "patch_embed.proj", 0);
     if (rc == G3D_OK) rc = load(&l, &m->normw, 1, d1, "norm.weight");
     if (rc == G3D_OK) rc = load(&l, &m->normb, 1, d1, "norm.bias");
     for (int i = 0; i < depth && rc == G3D_OK; i++) {
         dino_block *b = &m->blocks[i];
-        struct { float **dst; int nd; const int64_t *shape; const char *name; } t[] = {
-            {&b->n1w, 1, d1, "norm1.weight"},     {&b->n1b, 1, d1, "norm1.bias"},
-            {&b->qkvw, 2, qkvw, "attn.qkv.weight"}, {&b->qkvb, 1, qkvb, "attn.qkv.bias"},
-            {&b->projw, 2, projw, "attn.proj.weight"}, {&b->projb, 1, d1, "attn.proj.bias"},
-            {&b->ls1, 1, d1, "ls1.gamma"},        {&b->n2w, 1, d1, "norm2.weight"},
-            {&b->n2b, 1, d1, "norm2.bias"},       {&b->fc1w, 2, fc1w, "mlp.fc1.weight"},
-            {&b->fc1b, 1, fc1b, "mlp.fc1.bias"},  {&b->fc2w, 2, fc2w, "mlp.fc2.weight"},
-            {&b->fc2b, 1, d1, "mlp.fc2.bias"},    {&b->ls2, 1, d1, "ls2.gamma"},
+        struct { float **dst; const char *name; } t[] = {
+            {&b->n1w, "norm1.weight"}, {&b->n1b, "norm1.bias"}, {&b->ls1, "ls1.gamma"},
+            {&b->n2w, "norm2.weight"}, {&b->n2b, "norm2.bias"}, {&b->ls2, "ls2.gamma"},
         };
         for (size_t j = 0; j < sizeof t / sizeof *t && rc == G3D_OK; j++)
-            rc = load(&l, t[j].dst, t[j].nd, t[j].shape, "blocks.%d.%s", i, t[j].name);
+            rc = load(&l, t[j].dst, 1, d1, "blocks.%d.%s", i, t[j].name);
+        struct { g3d_nn_lin *L; const int64_t *shape; const char *name; } u[] = {
+            {&b->qkv, qkvw, "blocks.%d.attn.qkv"}, {&b->proj, projw, "blocks.%d.attn.proj"},
+            {&b->fc1, fc1w, "blocks.%d.mlp.fc1"},  {&b->fc2, fc2w, "blocks.%d.mlp.fc2"},
+        };
+        for (size_t j = 0; j < sizeof u / sizeof *u && rc == G3D_OK; j++) rc = load_lin(&l, u[j].L, 2, u[j].shape, u[j].name, i);
     }
     if (rc == G3D_OK && depth == 0) rc = G3D_ERR(G3D_ERR_MODEL, "%s: no %sblocks.0.* tensors", g3d_ckpt_path(ck), l.prefix);
     if (rc != G3D_OK) {
@@ -258,7 +281,8 @@ g3d_status g3d_dinov2_forward(const g3d_dinov2 *m, const float *x, int H, int W,
                 for (int ky = 0; ky < P; ky++)
                     memcpy(row + (c * P + ky) * P, x + ((size_t)c * H + py * P + ky) * W + px * P, sizeof(float) * P);
         }
-    g3d_nn_linear(patches, np, K, m->pew, m->peb, D, X + D);
+    rc = g3d_nn_lin_forward(&m->pe, patches, np, K, X + D, D, NULL);
+    if (rc != G3D_OK) goto done;
     if (trace && trace->want && !(trace->patch_embed = dup(X + D, (size_t)np * D))) {
         rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
         goto done;
@@ -270,21 +294,18 @@ g3d_status g3d_dinov2_forward(const g3d_dinov2 *m, const float *x, int H, int W,
     int next = 0;
     for (int bi = 0; bi < m->depth && rc == G3D_OK; bi++) {
         const dino_block *b = &m->blocks[bi];
+        /* X += ls1 * proj(attn(qkv(norm1(X)))); X += ls2 * fc2(GELU(fc1(norm2(X)))): LayerScale,
+         * residual and GELU ride in the products' epilogues */
+        const g3d_nn_epi res1 = {.scale = b->ls1, .res = X}, gelu = {.act = G3D_ACT_GELU}, res2 = {.scale = b->ls2, .res = X};
         g3d_nn_layernorm(X, n, D, b->n1w, b->n1b, LN_EPS, T);
-        g3d_nn_linear(T, n, D, b->qkvw, b->qkvb, 3 * D, big);
-        rc = g3d_nn_attention(big, n, D / HEAD_DIM, HEAD_DIM, 1.0f / sqrtf((float)HEAD_DIM), A);
+        rc = g3d_nn_lin_forward(&b->qkv, T, n, D, big, 3 * D, NULL);
+        if (rc == G3D_OK) rc = g3d_nn_attention(big, n, D / HEAD_DIM, HEAD_DIM, 1.0f / sqrtf((float)HEAD_DIM), A);
+        if (rc == G3D_OK) rc = g3d_nn_lin_forward(&b->proj, A, n, D, X, D, &res1);
         if (rc != G3D_OK) break;
-        g3d_nn_linear(A, n, D, b->projw, b->projb, D, T);
-#pragma omp parallel for schedule(static)
-        for (int i = 0; i < n; i++)
-            for (int c = 0; c < D; c++) X[(size_t)i * D + c] += b->ls1[c] * T[(size_t)i * D + c];
         g3d_nn_layernorm(X, n, D, b->n2w, b->n2b, LN_EPS, T);
-        g3d_nn_linear(T, n, D, b->fc1w, b->fc1b, m->hidden, big);
-        g3d_nn_gelu(big, (size_t)n * m->hidden);
-        g3d_nn_linear(big, n, m->hidden, b->fc2w, b->fc2b, D, T);
-#pragma omp parallel for schedule(static)
-        for (int i = 0; i < n; i++)
-            for (int c = 0; c < D; c++) X[(size_t)i * D + c] += b->ls2[c] * T[(size_t)i * D + c];
+        rc = g3d_nn_lin_forward(&b->fc1, T, n, D, big, m->hidden, &gelu);
+        if (rc == G3D_OK) rc = g3d_nn_lin_forward(&b->fc2, big, n, m->hidden, X, D, &res2);
+        if (rc != G3D_OK) break;
         if (trace && trace->want && !(trace->block[bi] = dup(X, nd))) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
         if (next < nlayers && layers[next] == bi && rc == G3D_OK) {
             g3d_nn_layernorm(X, n, D, m->normw, m->normb, LN_EPS, T);

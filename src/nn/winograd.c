@@ -273,7 +273,13 @@ static void run_task(const wtask *T, int m0, int t0, float *vp, float *macc, flo
             const float *plane = T->x + (size_t)(c0 + ci) * T->h * T->w;
             for (int r = 0; r < nr; r++) {
                 const int iy0 = m * runs[r].ty - c->pad_h, ix0 = m * runs[r].tx0 - c->pad_w;
-                for (int a = 0; a < al; a++) fill_line(plane, T->h, T->w, c->pad_mode, iy0 + a, ix0, line[a], ll);
+                /* the run's tiles need m len + 2 values; the last group of 16 reads on to
+                 * m (16 groups + 1), values that only reach unused tiles (kept finite) */
+                const int used = m * runs[r].len + 2, read = m * (16 * ((runs[r].len + 15) / 16) + 1);
+                for (int a = 0; a < al; a++) {
+                    fill_line(plane, T->h, T->w, c->pad_mode, iy0 + a, ix0, line[a], used);
+                    if (read > used) memset(line[a] + used, 0, sizeof(float) * (read - used));
+                }
                 for (int g = 0; g < runs[r].len; g += 16) {
                     float *lg[6];
                     for (int a = 0; a < al; a++) lg[a] = line[a] + m * g;
