@@ -25,6 +25,14 @@ rm -f "$T"/*.png
 expect 0 "txt2img" t2i -s 3 -o "$T/a.png"
 expect 0 "txt2img again, same seed" t2i -s 3 -o "$T/b.png"
 cmp -s "$T/a.png" "$T/b.png" && ok "same seed, same bytes" || bad "same seed, different bytes"
+# Progress: per step with an ETA on a terminal (a pseudo-terminal from script(1)), nothing in a pipe.
+grep -q "denoise" "$T/err" && bad "progress printed into a pipe: $(cat "$T/err")" || ok "no progress in a pipe"
+if command -v script >/dev/null 2>&1; then
+    script -qec "$GEN3D txt2img -m $M $PARTS -p 'a room' -W 24 -H 16 --steps 4 -s 3 -o $T/tty.png" /dev/null >"$T/tty" 2>&1
+    grep -q "denoise *4/4" "$T/tty" && ok "progress per step on a terminal" || bad "terminal progress: $(cat "$T/tty")"
+    script -qec "$GEN3D txt2img -q -m $M $PARTS -p 'a room' -W 24 -H 16 --steps 4 -s 3 -o $T/tty.png" /dev/null >"$T/tty" 2>&1
+    grep -q "denoise" "$T/tty" && bad "progress with -q: $(cat "$T/tty")" || ok "-q silences the terminal"
+fi
 expect 0 "another seed" t2i -s 4 --sampler dpmpp_2m --karras -o "$T/c.png"
 cmp -s "$T/a.png" "$T/c.png" && bad "another seed, same bytes" || ok "another seed, another picture"
 expect 0 "--noise instead of the seed" t2i -s 1 --noise "$FIX/sdpipe_noise.npy" -o "$T/n1.png"

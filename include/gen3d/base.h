@@ -143,9 +143,9 @@ typedef struct g3d_cancel {
 /* 1 when c is set and its callback asks to stop, else 0. */
 int g3d_cancel_requested(const g3d_cancel *c);
 
-/* The terminal reporter: on a TTY it redraws one line "stage  step/total  rate/s  ETA";
- * otherwise it prints a plain line at most every few seconds and at the end of each stage;
- * quiet prints nothing. `state` must outlive the returned g3d_progress. */
+/* The terminal reporter: on a TTY it redraws one line "stage  step/total  rate/s  ETA"; to
+ * anything else (a pipe, a file), and when quiet, it prints nothing. `state` must outlive the
+ * returned g3d_progress. */
 typedef struct g3d_progress_term {
     FILE *out;
     int is_tty, quiet;

@@ -42,16 +42,16 @@ static int term_report(void *user, const char *stage, int64_t step, int64_t tota
     char eta[32] = "", line[256];
     double rate;
 
-    if (st->quiet) return 0;
+    if (st->quiet || !st->is_tty) return 0;
     if (new_stage) {
-        if (st->is_tty && st->stage[0]) fputc('\n', st->out);
+        if (st->stage[0]) fputc('\n', st->out);
         snprintf(st->stage, sizeof st->stage, "%s", stage);
         st->t_stage = now;
         st->t_last = 0;
         st->first_step = step;
     }
-    /* Redraw at most ~10 times a second on a TTY; plain lines every 5 s otherwise. */
-    if (!done && now - st->t_last < (st->is_tty ? 0.1 : 5.0)) return 0;
+    /* Redraw at most ~10 times a second. */
+    if (!done && now - st->t_last < 0.1) return 0;
     st->t_last = now;
 
     rate = now > st->t_stage && step > st->first_step ? (double)(step - st->first_step) / (now - st->t_stage) : 0.0;
@@ -64,12 +64,8 @@ static int term_report(void *user, const char *stage, int64_t step, int64_t tota
     else
         snprintf(line, sizeof line, "%-10s %lld%s%s", stage, (long long)step, info ? "  " : "", info ? info : "");
 
-    if (st->is_tty) {
-        fprintf(st->out, "\r\033[K%s", line);
-        if (done) { fputc('\n', st->out); st->stage[0] = 0; }
-    } else {
-        fprintf(st->out, "%s\n", line);
-    }
+    fprintf(st->out, "\r\033[K%s", line);
+    if (done) { fputc('\n', st->out); st->stage[0] = 0; }
     fflush(st->out);
     return 0;
 }
