@@ -1,0 +1,224 @@
+/* ControlNet against the official v1.1 code (tests/fixtures/make_sdcontrol_golden.py): the
+ * tiny ControlNet in the published layout (control_model.* in a .pth) gives the official hint
+ * features and residuals for an inpainting hint, and the tiny SD 1.x UNet with those residuals
+ * added gives ControlledUnetModel's output. Then the inpainting hint, the ControlNet in the
+ * text-to-image and inpainting loops, and the refusals. */
+#include "golden.h"
+
+#include "gen3d/sd.h"
+
+static g3d_ckpt *g_act;
+
+static void on_trace(void *ctx, const char *name, const float *x, int c, int h, int w)
+{
+    int *compared = ctx;
+    if (!strcmp(name, "guided_hint") || !strncmp(name, "control", 7)) {
+        golden_compare(g_act, name, x, (size_t)c * h * w);
+        ++*compared;
+    }
+}
+
+TEST(controlnet_matches_official)
+{
+    g3d_ckpt *cck = NULL, *uck = NULL;
+    g3d_sd_controlnet *cn = NULL;
+    g3d_sd_unet *unet = NULL;
+    CHECK_OK(g3d_ckpt_open(test_fixture("sdcontrol_tiny.pth"), &cck));
+    CHECK_OK(g3d_ckpt_open(test_fixture("sdpipe_unet_tiny.safetensors"), &uck));
+    if (cck) CHECK_OK(g3d_sd_controlnet_load(cck, NULL, &cn));
+    if (uck) CHECK_OK(g3d_sd_unet_load(uck, NULL, &unet));
+    float *x = golden_floats(g_act, "x", NULL), *t = golden_floats(g_act, "t", NULL), *ctx = golden_floats(g_act, "context", NULL);
+    float *hint = golden_floats(g_act, "hint", NULL), *scale = golden_floats(g_act, "scale", NULL);
+    if (cn && unet && x && t && ctx && hint && scale) {
+        const g3d_sd_controlnet_config *c = g3d_sd_controlnet_get_config(cn);
+        char d[768];
+        printf("  %s\n", g3d_sd_controlnet_describe(c, d, sizeof d));
+        CHECK(c->hint_ch == 3 && c->net.in_ch == 4 && c->net.model_ch == 32 && c->net.levels == 2 && c->net.mult[1] == 2 &&
+              c->net.context_dim == 128 && c->net.heads == 8 && !strcmp(c->net.prefix, "control_model."));
+        CHECK_OK(g3d_sd_controlnet_check(c, "sdcontrol_tiny.pth", g3d_sd_unet_get_config(unet)));
+        size_t nr = g3d_sd_controlnet_residual_floats(cn, 8, 12);
+        /* in0, in1: 32 channels at 8 x 12; in2 (the downsampling): 32 at 4 x 6; in3 and the middle: 64 at 4 x 6 */
+        CHECK(nr == (size_t)(2 * 32 * 96 + 32 * 24 + 64 * 24 + 64 * 24));
+        float *res = malloc(sizeof(float) * nr), *eps = malloc(sizeof(float) * 4 * 96);
+        int compared = 0;
+        if (res && eps) {
+            CHECK_OK(g3d_sd_controlnet_forward(cn, x, 8, 12, t[0], ctx, 77, hint, 1.0f, res, on_trace, &compared));
+            CHECK(compared == 1 + 5);
+            CHECK_OK(g3d_sd_controlnet_forward(cn, x, 8, 12, t[0], ctx, 77, hint, scale[0], res, NULL, NULL));
+            CHECK_OK(g3d_sd_unet_forward_controlled(unet, x, 8, 12, t[0], ctx, 77, res, eps, NULL, NULL));
+            golden_compare(g_act, "eps", eps, 4 * 96);
+            CHECK_OK(g3d_sd_unet_forward_controlled(unet, x, 8, 12, t[0], ctx, 77, NULL, eps, NULL, NULL));
+            golden_compare(g_act, "eps_plain", eps, 4 * 96);
+        }
+        free(res);
+        free(eps);
+    }
+    free(x);
+    free(t);
+    free(ctx);
+    free(hint);
+    free(scale);
+    g3d_sd_unet_free(unet);
+    g3d_sd_controlnet_free(cn);
+    g3d_ckpt_free(uck);
+    g3d_ckpt_free(cck);
+}
+
+/* The official demo's hint from the golden's picture and mask; a prefill fills the hole instead. */
+TEST(inpaint_hint)
+{
+    int w = 0, h = 0;
+    float *rgb = golden_image(g_act, "image", &w, &h), *ref = golden_floats(g_act, "hint", NULL);
+    const g3d_tensor_info *mt = g3d_ckpt_find(g_act, "mask");
+    g3d_image img = {0}, mask = {0}, pre = {0}, hint = {0};
+    if (!rgb || !ref || !mt) goto done;
+    CHECK_OK(g3d_image_create(&img, w, h, 3));
+    CHECK_OK(g3d_image_create(&mask, w, h, 1));
+    CHECK_OK(g3d_image_create(&pre, w, h, 3));
+    if (!img.data || !mask.data || !pre.data) goto done;
+    memcpy(img.data, rgb, sizeof(float) * 3 * w * h);
+    for (int i = 0; i < w * h; i++) mask.data[i] = ((const uint8_t *)mt->data)[i];
+    for (size_t i = 0; i < g3d_image_size(&pre); i++) pre.data[i] = 0.25f;
+    CHECK_OK(g3d_sd_inpaint_hint(&img, &mask, NULL, w, h, &hint));
+    int same = hint.data != NULL;
+    for (int i = 0; same && i < w * h; i++)
+        for (int c = 0; c < 3; c++) same &= fabsf(hint.data[i * 3 + c] - ref[c * w * h + i]) < 1e-6f;
+    CHECK(same);
+    g3d_image_free(&hint);
+    CHECK_OK(g3d_sd_inpaint_hint(&img, &mask, &pre, w, h, &hint));
+    int ok = hint.data != NULL;
+    for (int i = 0; ok && i < w * h; i++)
+        for (int c = 0; c < 3; c++) ok &= hint.data[i * 3 + c] == (mask.data[i] > 0.5f ? 0.25f : img.data[i * 3 + c]);
+    CHECK(ok);
+    g3d_image_free(&hint);
+    /* four times the size, nearest: pixel (x, y) comes from (x / 4, y / 4) */
+    CHECK_OK(g3d_sd_inpaint_hint(&img, &mask, NULL, 4 * w, 4 * h, &hint));
+    if (hint.data) CHECK(g3d_image_px(&hint, 4 * 41 + 3, 4 * 21 + 2)[1] == -1.0f && g3d_image_px(&hint, 5, 6)[2] == img.data[(1 * w + 1) * 3 + 2]);
+    g3d_image_free(&hint);
+    CHECK_FAILS(g3d_sd_inpaint_hint(&img, &img, NULL, w, h, &hint));
+done:
+    free(rgb);
+    free(ref);
+    g3d_image_free(&img);
+    g3d_image_free(&mask);
+    g3d_image_free(&pre);
+}
+
+static g3d_sd_paths paths(const char *controlnet)
+{
+    static char model[512], vae[512], text[512], tok[512], cn[512];
+    snprintf(model, sizeof model, "%s", test_fixture("sdpipe_unet_tiny.safetensors"));
+    snprintf(vae, sizeof vae, "%s", test_fixture("sdunet_vae_tiny.safetensors"));
+    snprintf(text, sizeof text, "%s", test_fixture("clip_sd1_tiny.ckpt"));
+    snprintf(tok, sizeof tok, "%s", test_fixture("cliptok_merges.txt.gz"));
+    snprintf(cn, sizeof cn, "%s", test_fixture(controlnet));
+    return (g3d_sd_paths){.model = model, .vae = vae, .text_encoder = text, .tokenizer = tok, .prediction = -1, .controlnet = cn};
+}
+
+/* The ControlNet in the loops: scale 0 gives the plain model's picture exactly, scale 1 another
+ * one; inpainting builds the hint itself and keeps the known pixels. */
+TEST(controlnet_in_the_loops)
+{
+    g3d_sd_paths pp = paths("sdcontrol_tiny.pth");
+    g3d_sd *m = NULL, *plain = NULL;
+    CHECK_OK(g3d_sd_load(&pp, &m));
+    pp.controlnet = NULL;
+    CHECK_OK(g3d_sd_load(&pp, &plain));
+    if (!m || !plain) goto done;
+    CHECK(g3d_sd_get_controlnet(m) && !g3d_sd_get_controlnet(plain));
+    g3d_image img = {0}, mask = {0}, a = {0}, b = {0}, c = {0}, ctl = {0};
+    CHECK_OK(g3d_image_create(&img, 24, 16, 3));
+    CHECK_OK(g3d_image_create(&mask, 24, 16, 1));
+    if (!img.data || !mask.data) goto done;
+    for (int y = 0; y < 16; y++)
+        for (int x = 0; x < 24; x++) {
+            float *px = g3d_image_px(&img, x, y);
+            px[0] = x / 23.0f, px[1] = y / 15.0f, px[2] = 0.6f;
+            *g3d_image_px(&mask, x, y) = x >= 8 && x < 20 && y >= 4;
+        }
+    g3d_sd_params p = g3d_sd_defaults();
+    p.prompt = "a red chair";
+    p.width = 24, p.height = 16;
+    p.sampler.steps = 3;
+    /* text-to-image: the hint is 8x the latent (VAE factor 2 here, so 4x the picture) */
+    CHECK_FAILS(g3d_sd_txt2img(m, &p, &a));
+    CHECK_OK(g3d_sd_inpaint_hint(&img, &mask, NULL, 96, 64, &ctl));
+    p.control = &ctl;
+    p.control_scale = 0.0f;
+    CHECK_OK(g3d_sd_txt2img(m, &p, &a));
+    p.control = NULL;
+    CHECK_OK(g3d_sd_txt2img(plain, &p, &b));
+    p.control = &ctl;
+    p.control_scale = 1.0f;
+    CHECK_OK(g3d_sd_txt2img(m, &p, &c));
+    CHECK(a.data && b.data && c.data && !memcmp(a.data, b.data, sizeof(float) * g3d_image_size(&a)) &&
+          memcmp(a.data, c.data, sizeof(float) * g3d_image_size(&a)));
+    g3d_image_free(&a);
+    g3d_image_free(&b);
+    g3d_image_free(&c);
+    /* a control image for a plain model, one of the wrong size */
+    CHECK_FAILS(g3d_sd_txt2img(plain, &p, &a));
+    p.control = &img;
+    CHECK_FAILS(g3d_sd_txt2img(m, &p, &a));
+    CHECK(strstr(g3d_error_message(), "96x64") != NULL);
+    /* inpainting: the hint from the picture and mask, known pixels kept */
+    p.control = NULL;
+    CHECK_OK(g3d_sd_inpaint(m, &p, &img, &mask, &a));
+    CHECK_OK(g3d_sd_inpaint(plain, &p, &img, &mask, &b));
+    int kept = a.data && b.data, differs = 0;
+    for (int i = 0; kept && i < 24 * 16; i++)
+        for (int k = 0; k < 3; k++) {
+            if (mask.data[i] > 0.5f) differs += a.data[i * 3 + k] != b.data[i * 3 + k];
+            else kept &= a.data[i * 3 + k] == img.data[i * 3 + k];
+        }
+    CHECK(kept && differs > 0 && p.control == NULL);
+    g3d_image_free(&a);
+    g3d_image_free(&b);
+    g3d_image_free(&ctl);
+    g3d_image_free(&img);
+    g3d_image_free(&mask);
+done:
+    g3d_sd_free(m);
+    g3d_sd_free(plain);
+}
+
+TEST(refusals)
+{
+    /* a ControlNet for another UNet: the context-48 SD 1.x fixture, named with both sets of figures */
+    g3d_ckpt *cck = NULL, *uck = NULL;
+    g3d_sd_controlnet_config cc;
+    g3d_sd_unet_config uc;
+    CHECK_OK(g3d_ckpt_open(test_fixture("sdcontrol_tiny.pth"), &cck));
+    CHECK_OK(g3d_ckpt_open(test_fixture("sdunet_sd1_tiny.ckpt"), &uck));
+    if (cck && uck) {
+        CHECK_OK(g3d_sd_controlnet_probe(cck, NULL, &cc));
+        CHECK_OK(g3d_sd_unet_probe(uck, NULL, &uc));
+        CHECK_FAILS(g3d_sd_controlnet_check(&cc, "cn.pth", &uc));
+        printf("  %s\n", g3d_error_message());
+        CHECK(!strncmp(g3d_error_message(), "cn.pth: ", 8) && strstr(g3d_error_message(), "context 128") &&
+              strstr(g3d_error_message(), "context 48"));
+        /* a UNet is not a ControlNet, nor the other way round */
+        CHECK_FAILS(g3d_sd_controlnet_probe(uck, NULL, &cc));
+        CHECK(strstr(g3d_error_message(), "not a ControlNet") != NULL);
+        CHECK_FAILS(g3d_sd_unet_probe(cck, NULL, &uc));
+    }
+    g3d_ckpt_free(cck);
+    g3d_ckpt_free(uck);
+    g3d_sd *m = NULL;
+    g3d_sd_paths pp = paths("sdunet_vae_tiny.safetensors");
+    CHECK_FAILS(g3d_sd_load(&pp, &m));
+    CHECK(m == NULL);
+}
+
+int main(void)
+{
+    CHECK_OK(g3d_ckpt_open(test_fixture("sdcontrol_golden.safetensors"), &g_act));
+    if (g_act) {
+        RUN(controlnet_matches_official);
+        RUN(inpaint_hint);
+        RUN(controlnet_in_the_loops);
+        RUN(refusals);
+    }
+    g3d_ckpt_free(g_act);
+    return test_summary();
+}
