@@ -36,6 +36,20 @@ cmp -s "$T/n1.png" "$T/n2.png" && ok "the given noise decides" || bad "--noise i
 expect 0 "inpaint (fallback)" "$GEN3D" inpaint -m "$M" $PARTS -i "$T/a.png" --mask "$T/c.png" -p "$PROMPT" --steps 3 -o "$T/i.png"
 grep -q "latent blending" "$T/err" && ok "the fallback is named" || bad "no word of the fallback"
 
+# the inpainting ControlNet, its hint as the official demo makes it or prefilled by LaMa
+expect 0 "info names a ControlNet" "$GEN3D" info "$FIX/sdcontrol_tiny.pth"
+grep -q "ControlNet for SD 1.x (hint 3 channels at 8x the latent; .*model channels 32, multipliers 1/2.*context 128" "$T/out" \
+    && ok "ControlNet configuration" || bad "info: $(head -1 "$T/out")"
+expect 0 "inpaint with a ControlNet" "$GEN3D" inpaint -m "$M" $PARTS --controlnet "$FIX/sdcontrol_tiny.pth" -i "$T/a.png" --mask "$T/c.png" \
+    -p "$PROMPT" --steps 3 -o "$T/icn.png"
+cmp -s "$T/i.png" "$T/icn.png" && bad "the ControlNet changed nothing" || ok "the ControlNet changes the picture"
+expect 0 "control scale 0" "$GEN3D" inpaint -m "$M" $PARTS --controlnet "$FIX/sdcontrol_tiny.pth" --control-scale 0 -i "$T/a.png" \
+    --mask "$T/c.png" -p "$PROMPT" --steps 3 -o "$T/icn0.png"
+cmp -s "$T/i.png" "$T/icn0.png" && ok "scale 0: the plain model's picture" || bad "scale 0 differs from no ControlNet"
+expect 0 "inpaint with a LaMa-prefilled hint" "$GEN3D" inpaint -m "$M" $PARTS --controlnet "$FIX/sdcontrol_tiny.pth" \
+    --prefill-lama "$FIX/lama_tiny.ckpt" -i "$T/a.png" --mask "$T/c.png" -p "$PROMPT" --steps 3 -o "$T/ilama.png"
+cmp -s "$T/icn.png" "$T/ilama.png" && bad "the prefill changed nothing" || ok "the prefill changes the picture"
+
 # bad input: one line, non-zero exit, no output
 no_out() { [ ! -e "$T/bad.png" ] && ok "$1: no output" || { bad "$1: output written"; rm -f "$T/bad.png"; }; }
 expect 1 "not a diffusion checkpoint" "$GEN3D" txt2img -m "$FIX/dav2_tiny.pth" $PARTS -p x -W 24 -H 16 -o "$T/bad.png"
@@ -59,4 +73,11 @@ expect 1 "NaN weights" "$GEN3D" txt2img -m "$T/nan.safetensors" $PARTS -p x -W 2
 grep -q "NaN" "$T/err" && ok "the NaN tensor named" || bad "NaN: $(cat "$T/err")"
 no_out "NaN weights"
 [ "$(grep -c "error" "$T/err")" -eq 1 ] && ok "one error line" || bad "error lines: $(cat "$T/err")"
+expect 1 "not a ControlNet" "$GEN3D" inpaint -m "$M" $PARTS --controlnet "$FIX/sdunet_sd1_tiny.ckpt" -i "$T/a.png" --mask "$T/c.png" \
+    -p x -o "$T/bad.png"
+grep -q "sdunet_sd1_tiny.ckpt: not a ControlNet" "$T/err" && ok "the file named" || bad "not a ControlNet: $(cat "$T/err")"
+no_out "not a ControlNet"
+expect 2 "--prefill-lama without --controlnet" "$GEN3D" inpaint -m "$M" $PARTS --prefill-lama "$FIX/lama_tiny.ckpt" -i "$T/a.png" \
+    --mask "$T/c.png" -p x -o "$T/bad.png"
+no_out "--prefill-lama without --controlnet"
 finish
