@@ -182,6 +182,96 @@ done:
     g3d_sd_free(plain);
 }
 
+/* diffusers' ControlNetModel names for the fixture's shape (two levels, one res block each,
+ * attention at level 0), prefix by prefix, and its res blocks' leaves. */
+static const char *const DIFFUSERS[][2] = {
+    {"time_embed.0.", "time_embedding.linear_1."}, {"time_embed.2.", "time_embedding.linear_2."}, {"input_blocks.0.0.", "conv_in."},
+    {"input_blocks.1.0.", "down_blocks.0.resnets.0."}, {"input_blocks.1.1.", "down_blocks.0.attentions.0."},
+    {"input_blocks.2.0.op.", "down_blocks.0.downsamplers.0.conv."}, {"input_blocks.3.0.", "down_blocks.1.resnets.0."},
+    {"middle_block.0.", "mid_block.resnets.0."}, {"middle_block.1.", "mid_block.attentions.0."}, {"middle_block.2.", "mid_block.resnets.1."},
+    {"input_hint_block.0.", "controlnet_cond_embedding.conv_in."}, {"input_hint_block.2.", "controlnet_cond_embedding.blocks.0."},
+    {"input_hint_block.4.", "controlnet_cond_embedding.blocks.1."}, {"input_hint_block.6.", "controlnet_cond_embedding.blocks.2."},
+    {"input_hint_block.8.", "controlnet_cond_embedding.blocks.3."}, {"input_hint_block.10.", "controlnet_cond_embedding.blocks.4."},
+    {"input_hint_block.12.", "controlnet_cond_embedding.blocks.5."}, {"input_hint_block.14.", "controlnet_cond_embedding.conv_out."},
+    {"zero_convs.0.0.", "controlnet_down_blocks.0."}, {"zero_convs.1.0.", "controlnet_down_blocks.1."},
+    {"zero_convs.2.0.", "controlnet_down_blocks.2."}, {"zero_convs.3.0.", "controlnet_down_blocks.3."},
+    {"middle_block_out.0.", "controlnet_mid_block."}};
+static const char *const RES_LEAVES[][2] = {{"in_layers.0.", "norm1."}, {"in_layers.2.", "conv1."}, {"emb_layers.1.", "time_emb_proj."},
+                                            {"out_layers.0.", "norm2."}, {"out_layers.3.", "conv2."}, {"skip_connection.", "conv_shortcut."}};
+
+/* The fixture as a diffusers ControlNetModel folder gives the same residuals, bit for bit. */
+TEST(diffusers_layout)
+{
+    g3d_ckpt *ck = NULL, *dck = NULL;
+    CHECK_OK(g3d_ckpt_open(test_fixture("sdcontrol_tiny.pth"), &ck));
+    if (!ck) return;
+    char *dir = strdup(test_tmp("sd_controlnet_diffusers"));
+    g3d_remove_tree(dir);
+    CHECK_OK(g3d_mkdirs(dir));
+    int64_t n = g3d_ckpt_count(ck), k = 0;
+    g3d_tensor_out *t = calloc((size_t)n, sizeof *t);
+    char(*names)[256] = calloc((size_t)n, sizeof *names);
+    for (int64_t i = 0; t && names && i < n; i++) {
+        const g3d_tensor_info *ti = g3d_ckpt_tensor(ck, i);
+        const char *nm = ti->name + strlen("control_model.");
+        for (size_t r = 0; r < sizeof DIFFUSERS / sizeof *DIFFUSERS; r++) {
+            size_t len = strlen(DIFFUSERS[r][0]);
+            if (strncmp(nm, DIFFUSERS[r][0], len)) continue;
+            const char *leaf = nm + len, *to = "";
+            for (size_t q = 0; strstr(DIFFUSERS[r][1], "resnets") && q < sizeof RES_LEAVES / sizeof *RES_LEAVES; q++)
+                if (!strncmp(leaf, RES_LEAVES[q][0], strlen(RES_LEAVES[q][0]))) to = RES_LEAVES[q][1], leaf += strlen(RES_LEAVES[q][0]);
+            snprintf(names[k], sizeof names[k], "%s%s%s", DIFFUSERS[r][1], to, leaf);
+            t[k] = (g3d_tensor_out){.name = names[k], .dtype = ti->dtype, .ndim = ti->ndim, .data = ti->data};
+            memcpy(t[k].shape, ti->shape, sizeof ti->shape);
+            k++;
+            break;
+        }
+    }
+    CHECK(k == n);
+    char *file = g3d_path_join(dir, "diffusion_pytorch_model.safetensors"), *cfg = g3d_path_join(dir, "config.json");
+    CHECK_OK(g3d_safetensors_write(file, t, (int)k, NULL));
+    const char *json = "{\"_class_name\": \"ControlNetModel\", \"attention_head_dim\": 8, \"cross_attention_dim\": 128, \"in_channels\": 4}";
+    CHECK_OK(g3d_write_file_atomic(cfg, json, strlen(json)));
+    CHECK_OK(g3d_ckpt_open(file, &dck));
+    g3d_sd_controlnet *a = NULL, *b = NULL;
+    if (dck) CHECK_OK(g3d_sd_controlnet_load(dck, json, &b));
+    CHECK_OK(g3d_sd_controlnet_load(ck, NULL, &a));
+    float *x = golden_floats(g_act, "x", NULL), *ts = golden_floats(g_act, "t", NULL), *ctx = golden_floats(g_act, "context", NULL);
+    float *hint = golden_floats(g_act, "hint", NULL);
+    if (a && b && x && ts && ctx && hint) {
+        CHECK(g3d_sd_controlnet_get_config(b)->net.diffusers && g3d_sd_controlnet_get_config(b)->net.heads == 8);
+        size_t nr = g3d_sd_controlnet_residual_floats(a, 8, 12);
+        float *ra = malloc(sizeof(float) * nr), *rb = malloc(sizeof(float) * nr);
+        if (ra && rb) {
+            CHECK_OK(g3d_sd_controlnet_forward(a, x, 8, 12, ts[0], ctx, 77, hint, 1.0f, ra, NULL, NULL));
+            CHECK_OK(g3d_sd_controlnet_forward(b, x, 8, 12, ts[0], ctx, 77, hint, 1.0f, rb, NULL, NULL));
+            CHECK(!memcmp(ra, rb, sizeof(float) * nr));
+        }
+        free(ra);
+        free(rb);
+    }
+    /* the folder through the pipeline's loader */
+    g3d_sd_paths pp = paths("sdcontrol_tiny.pth");
+    pp.controlnet = dir;
+    g3d_sd *m = NULL;
+    CHECK_OK(g3d_sd_load(&pp, &m));
+    CHECK(m && g3d_sd_get_controlnet(m) && g3d_sd_controlnet_get_config(g3d_sd_get_controlnet(m))->net.diffusers);
+    g3d_sd_free(m);
+    free(x);
+    free(ts);
+    free(ctx);
+    free(hint);
+    g3d_sd_controlnet_free(a);
+    g3d_sd_controlnet_free(b);
+    g3d_ckpt_free(dck);
+    g3d_ckpt_free(ck);
+    free(file);
+    free(cfg);
+    free(t);
+    free(names);
+    free(dir);
+}
+
 TEST(refusals)
 {
     /* a ControlNet for another UNet: the context-48 SD 1.x fixture, named with both sets of figures */
@@ -217,6 +307,7 @@ int main(void)
         RUN(controlnet_matches_official);
         RUN(inpaint_hint);
         RUN(controlnet_in_the_loops);
+        RUN(diffusers_layout);
         RUN(refusals);
     }
     g3d_ckpt_free(g_act);
