@@ -36,6 +36,11 @@ cmp -s "$T/n1.png" "$T/n2.png" && ok "the given noise decides" || bad "--noise i
 expect 0 "inpaint (fallback)" "$GEN3D" inpaint -m "$M" $PARTS -i "$T/a.png" --mask "$T/c.png" -p "$PROMPT" --steps 3 -o "$T/i.png"
 grep -q "latent blending" "$T/err" && ok "the fallback is named" || bad "no word of the fallback"
 
+# a 9-channel inpainting model from the official run's noise: no fallback
+expect 0 "inpaint (9-channel model, --noise)" "$GEN3D" inpaint -m "$FIX/sdinpaint_unet_tiny.safetensors" $PARTS -i "$FIX/sdinpaint_image.png" \
+    --mask "$FIX/sdinpaint_mask.png" -p "$PROMPT" --steps 10 --noise "$FIX/sdinpaint_noise.npy" -o "$T/i9.png"
+grep -q "latent blending" "$T/err" && bad "a fallback for an inpainting model" || ok "no fallback"
+
 # the inpainting ControlNet, its hint as the official demo makes it or prefilled by LaMa
 expect 0 "info names a ControlNet" "$GEN3D" info "$FIX/sdcontrol_tiny.pth"
 grep -q "ControlNet for SD 1.x (hint 3 channels at 8x the latent; .*model channels 32, multipliers 1/2.*context 128" "$T/out" \
