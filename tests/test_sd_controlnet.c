@@ -1,8 +1,8 @@
 /* ControlNet against the official v1.1 code (tests/fixtures/make_sdcontrol_golden.py): the
  * tiny ControlNet in the published layout (control_model.* in a .pth) gives the official hint
- * features and residuals for an inpainting hint, and the tiny SD 1.x UNet with those residuals
- * added gives ControlledUnetModel's output. Then the inpainting hint, the ControlNet in the
- * text-to-image and inpainting loops, and the refusals. */
+ * features and residuals for an inpainting hint, and the tiny 9-channel SD 1.x inpainting UNet
+ * with those residuals added gives ControlledUnetModel's output. Then the inpainting hint, the
+ * ControlNet in the inpainting loop, the diffusers layout and the refusals. */
 #include "golden.h"
 
 #include "gen3d/sd.h"
@@ -24,7 +24,7 @@ TEST(controlnet_matches_official)
     g3d_sd_controlnet *cn = NULL;
     g3d_sd_unet *unet = NULL;
     CHECK_OK(g3d_ckpt_open(test_fixture("sdcontrol_tiny.pth"), &cck));
-    CHECK_OK(g3d_ckpt_open(test_fixture("sdpipe_unet_tiny.safetensors"), &uck));
+    CHECK_OK(g3d_ckpt_open(test_fixture("sdinpaint_unet_tiny.safetensors"), &uck));
     if (cck) CHECK_OK(g3d_sd_controlnet_load(cck, NULL, &cn));
     if (uck) CHECK_OK(g3d_sd_unet_load(uck, NULL, &unet));
     float *x = golden_floats(g_act, "x", NULL), *t = golden_floats(g_act, "t", NULL), *ctx = golden_floats(g_act, "context", NULL);
@@ -33,15 +33,16 @@ TEST(controlnet_matches_official)
         const g3d_sd_controlnet_config *c = g3d_sd_controlnet_get_config(cn);
         char d[768];
         printf("  %s\n", g3d_sd_controlnet_describe(c, d, sizeof d));
-        CHECK(c->hint_ch == 3 && c->net.in_ch == 4 && c->net.model_ch == 32 && c->net.levels == 2 && c->net.mult[1] == 2 &&
+        CHECK(c->hint_ch == 3 && c->net.in_ch == 4 && c->net.model_ch == 32 && c->net.levels == 2 && c->net.mult[1] == 1 &&
               c->net.context_dim == 128 && c->net.heads == 8 && !strcmp(c->net.prefix, "control_model."));
         CHECK_OK(g3d_sd_controlnet_check(c, "sdcontrol_tiny.pth", g3d_sd_unet_get_config(unet)));
         size_t nr = g3d_sd_controlnet_residual_floats(cn, 8, 12);
-        /* in0, in1: 32 channels at 8 x 12; in2 (the downsampling): 32 at 4 x 6; in3 and the middle: 64 at 4 x 6 */
-        CHECK(nr == (size_t)(2 * 32 * 96 + 32 * 24 + 64 * 24 + 64 * 24));
+        /* in0, in1: 32 channels at 8 x 12; in2 (the downsampling), in3 and the middle: 32 at 4 x 6 */
+        CHECK(nr == (size_t)(2 * 32 * 96 + 3 * 32 * 24));
         float *res = malloc(sizeof(float) * nr), *eps = malloc(sizeof(float) * 4 * 96);
         int compared = 0;
         if (res && eps) {
+            /* the ControlNet reads the first 4 of the UNet's 9 input channels */
             CHECK_OK(g3d_sd_controlnet_forward(cn, x, 8, 12, t[0], ctx, 77, hint, 1.0f, res, on_trace, &compared));
             CHECK(compared == 1 + 5);
             CHECK_OK(g3d_sd_controlnet_forward(cn, x, 8, 12, t[0], ctx, 77, hint, scale[0], res, NULL, NULL));
@@ -107,7 +108,7 @@ done:
 static g3d_sd_paths paths(const char *controlnet)
 {
     static char model[512], vae[512], text[512], tok[512], cn[512];
-    snprintf(model, sizeof model, "%s", test_fixture("sdpipe_unet_tiny.safetensors"));
+    snprintf(model, sizeof model, "%s", test_fixture("sdinpaint_unet_tiny.safetensors"));
     snprintf(vae, sizeof vae, "%s", test_fixture("sdunet_vae_tiny.safetensors"));
     snprintf(text, sizeof text, "%s", test_fixture("clip_sd1_tiny.ckpt"));
     snprintf(tok, sizeof tok, "%s", test_fixture("cliptok_merges.txt.gz"));
@@ -115,18 +116,18 @@ static g3d_sd_paths paths(const char *controlnet)
     return (g3d_sd_paths){.model = model, .vae = vae, .text_encoder = text, .tokenizer = tok, .prediction = -1, .controlnet = cn};
 }
 
-/* The ControlNet in the loops: scale 0 gives the plain model's picture exactly, scale 1 another
- * one; inpainting builds the hint itself and keeps the known pixels. */
-TEST(controlnet_in_the_loops)
+/* The ControlNet in the inpainting loop: scale 0 gives the plain model's picture exactly, scale 1
+ * another one with the known pixels kept; the hint built inside is the helper's. */
+TEST(controlnet_in_the_loop)
 {
     g3d_sd_paths pp = paths("sdcontrol_tiny.pth");
     g3d_sd *m = NULL, *plain = NULL;
     CHECK_OK(g3d_sd_load(&pp, &m));
     pp.controlnet = NULL;
     CHECK_OK(g3d_sd_load(&pp, &plain));
+    g3d_image img = {0}, mask = {0}, a = {0}, b = {0}, c = {0}, ctl = {0};
     if (!m || !plain) goto done;
     CHECK(g3d_sd_get_controlnet(m) && !g3d_sd_get_controlnet(plain));
-    g3d_image img = {0}, mask = {0}, a = {0}, b = {0}, c = {0}, ctl = {0};
     CHECK_OK(g3d_image_create(&img, 24, 16, 3));
     CHECK_OK(g3d_image_create(&mask, 24, 16, 1));
     if (!img.data || !mask.data) goto done;
@@ -138,31 +139,14 @@ TEST(controlnet_in_the_loops)
         }
     g3d_sd_params p = g3d_sd_defaults();
     p.prompt = "a red chair";
-    p.width = 24, p.height = 16;
     p.sampler.steps = 3;
-    /* text-to-image: the hint is 8x the latent (VAE factor 2 here, so 4x the picture) */
-    CHECK_FAILS(g3d_sd_txt2img(m, &p, &a));
-    CHECK_OK(g3d_sd_inpaint_hint(&img, &mask, NULL, 96, 64, &ctl));
-    p.control = &ctl;
     p.control_scale = 0.0f;
-    CHECK_OK(g3d_sd_txt2img(m, &p, &a));
-    p.control = NULL;
-    CHECK_OK(g3d_sd_txt2img(plain, &p, &b));
-    p.control = &ctl;
-    p.control_scale = 1.0f;
-    CHECK_OK(g3d_sd_txt2img(m, &p, &c));
-    CHECK(a.data && b.data && c.data && !memcmp(a.data, b.data, sizeof(float) * g3d_image_size(&a)) &&
-          memcmp(a.data, c.data, sizeof(float) * g3d_image_size(&a)));
+    CHECK_OK(g3d_sd_inpaint(m, &p, &img, &mask, &a));
+    CHECK_OK(g3d_sd_inpaint(plain, &p, &img, &mask, &b));
+    CHECK(a.data && b.data && !memcmp(a.data, b.data, sizeof(float) * g3d_image_size(&a)));
     g3d_image_free(&a);
     g3d_image_free(&b);
-    g3d_image_free(&c);
-    /* a control image for a plain model, one of the wrong size */
-    CHECK_FAILS(g3d_sd_txt2img(plain, &p, &a));
-    p.control = &img;
-    CHECK_FAILS(g3d_sd_txt2img(m, &p, &a));
-    CHECK(strstr(g3d_error_message(), "96x64") != NULL);
-    /* inpainting: the hint from the picture and mask, known pixels kept */
-    p.control = NULL;
+    p.control_scale = 1.0f;
     CHECK_OK(g3d_sd_inpaint(m, &p, &img, &mask, &a));
     CHECK_OK(g3d_sd_inpaint(plain, &p, &img, &mask, &b));
     int kept = a.data && b.data, differs = 0;
@@ -172,12 +156,23 @@ TEST(controlnet_in_the_loops)
             else kept &= a.data[i * 3 + k] == img.data[i * 3 + k];
         }
     CHECK(kept && differs > 0 && p.control == NULL);
+    /* the same hint given: the same picture (8x the latent: the VAE's factor is 2 here, so 4x the picture) */
+    CHECK_OK(g3d_sd_inpaint_hint(&img, &mask, NULL, 96, 64, &ctl));
+    p.control = &ctl;
+    CHECK_OK(g3d_sd_inpaint(m, &p, &img, &mask, &c));
+    CHECK(a.data && c.data && !memcmp(a.data, c.data, sizeof(float) * g3d_image_size(&a)));
+    g3d_image_free(&c);
+    /* a control image for a plain model, one of the wrong size */
+    CHECK_FAILS(g3d_sd_inpaint(plain, &p, &img, &mask, &c));
+    p.control = &img;
+    CHECK_FAILS(g3d_sd_inpaint(m, &p, &img, &mask, &c));
+    CHECK(strstr(g3d_error_message(), "96x64") != NULL && c.data == NULL);
+done:
     g3d_image_free(&a);
     g3d_image_free(&b);
     g3d_image_free(&ctl);
     g3d_image_free(&img);
     g3d_image_free(&mask);
-done:
     g3d_sd_free(m);
     g3d_sd_free(plain);
 }
@@ -297,6 +292,13 @@ TEST(refusals)
     g3d_sd *m = NULL;
     g3d_sd_paths pp = paths("sdunet_vae_tiny.safetensors");
     CHECK_FAILS(g3d_sd_load(&pp, &m));
+    /* the text-to-image golden's UNet has multipliers 1/2 */
+    pp = paths("sdcontrol_tiny.pth");
+    char model[512];
+    snprintf(model, sizeof model, "%s", test_fixture("sdpipe_unet_tiny.safetensors"));
+    pp.model = model;
+    CHECK_FAILS(g3d_sd_load(&pp, &m));
+    CHECK(strstr(g3d_error_message(), "multipliers 1/1") && strstr(g3d_error_message(), "multipliers 1/2"));
     CHECK(m == NULL);
 }
 
@@ -306,7 +308,7 @@ int main(void)
     if (g_act) {
         RUN(controlnet_matches_official);
         RUN(inpaint_hint);
-        RUN(controlnet_in_the_loops);
+        RUN(controlnet_in_the_loop);
         RUN(diffusers_layout);
         RUN(refusals);
     }
