@@ -189,10 +189,12 @@ typedef enum g3d_sd_sampler_kind {
                         evaluates the second timestep twice: N + 1 model calls), "leading" timesteps
                         1000/N apart from 1, diffusers' float32 schedule; the default of SD 1.5's
                         diffusers pipeline */
+    G3D_SD_PLMS,     /* ldm's PLMSSampler: DDIM's timesteps, a pseudo improved Euler first step (N + 1 model
+                        calls), then Adams-Bashforth of order 2 to 4; epsilon models, eta 0 */
     G3D_SD_SAMPLER_COUNT
 } g3d_sd_sampler_kind;
 
-/* "ddim", "euler", "euler_a", "dpmpp_2m" (also "dpm++2m"), "pndm"; -1 if unknown. */
+/* "ddim", "euler", "euler_a", "dpmpp_2m" (also "dpm++2m"), "pndm", "plms"; -1 if unknown. */
 int g3d_sd_sampler_parse(const char *name);
 const char *g3d_sd_sampler_name(g3d_sd_sampler_kind k);
 

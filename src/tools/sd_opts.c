@@ -19,7 +19,7 @@ static const char *DESC_COMMON =
     "the head split and v-prediction when they differ from the family's defaults; --vae and\n"
     "--text-encoder take those parts from other files. The prompt is tokenized with --tokenizer or\n"
     "OpenAI's CLIP vocabulary (docs/text.md); a prompt longer than the 77-token context is refused.\n"
-    "Samplers: ddim (eta: --eta), pndm (diffusers' default for SD 1.5), euler, euler_a, dpmpp_2m;\n"
+    "Samplers: ddim (eta: --eta), pndm (diffusers' default for SD 1.5), plms (ldm's), euler, euler_a, dpmpp_2m;\n"
     "--karras uses Karras et al.'s sigmas for the last three. The same seed gives the same picture, byte for byte; --noise FILE.npy gives the\n"
     "initial latent noise [1, 4, H/8, W/8] instead (to compare with another implementation).";
 
@@ -37,7 +37,7 @@ typedef struct sd_cli {
     {'n', "negative", G3D_OPT_STRING, &(c)->negative, "TEXT", "what to avoid (the unconditional prompt)"},             \
     {0, "steps", G3D_OPT_INT, &(c)->steps, "N", "denoising steps"},                                                   \
     {0, "cfg", G3D_OPT_DOUBLE, &(c)->cfg, "S", "classifier-free guidance scale (1: none)"},                           \
-    {0, "sampler", G3D_OPT_STRING, &(c)->sampler, "NAME", "ddim, pndm, euler, euler_a or dpmpp_2m"},                        \
+    {0, "sampler", G3D_OPT_STRING, &(c)->sampler, "NAME", "ddim, pndm, plms, euler, euler_a or dpmpp_2m"},                  \
     {0, "karras", G3D_OPT_FLAG, &(c)->karras, NULL, "Karras sigmas (euler, euler_a, dpmpp_2m)"},                      \
     {0, "eta", G3D_OPT_DOUBLE, &(c)->eta, "E", "DDIM's eta (0: deterministic)"},                                     \
     {0, "noise", G3D_OPT_STRING, &(c)->noise, "FILE.npy", "initial latent noise [1, 4, H/8, W/8] instead of the seed's"}, \
@@ -67,11 +67,11 @@ static int sd_cli_params(sd_cli *c, g3d_sd_params *p, const char *cmd)
     if (!c->prompt || !c->prompt[strspn(c->prompt, " \t\r\n")]) return g3d_cli_errorf(G3D_EXIT_USAGE, "-p PROMPT is required and may not be empty");
     if (!c->common.output) return g3d_cli_errorf(G3D_EXIT_USAGE, "-o OUT.png is required");
     int k = g3d_sd_sampler_parse(c->sampler);
-    if (k < 0) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sampler %s: ddim, pndm, euler, euler_a or dpmpp_2m expected", c->sampler);
+    if (k < 0) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sampler %s: ddim, pndm, plms, euler, euler_a or dpmpp_2m expected", c->sampler);
     if (c->steps < 1 || c->steps > 1000) return g3d_cli_errorf(G3D_EXIT_USAGE, "--steps must be 1 to 1000");
     if (!(c->cfg >= 0 && c->cfg <= 100)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--cfg must be 0 to 100");
     if (!(c->eta >= 0 && c->eta <= 1)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--eta must be 0 to 1");
-    if (c->karras && (k == G3D_SD_DDIM || k == G3D_SD_PNDM)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--karras is for euler, euler_a and dpmpp_2m");
+    if (c->karras && (k == G3D_SD_DDIM || k == G3D_SD_PNDM || k == G3D_SD_PLMS)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--karras is for euler, euler_a and dpmpp_2m");
     *p = g3d_sd_defaults();
     p->prompt = c->prompt;
     p->negative = c->negative;
