@@ -105,6 +105,14 @@ static g3d_status after_step(const run *r, int i, int total, float *x, float a, 
     return G3D_OK;
 }
 
+/* after_step for the samplers on training timesteps: the next timestep's sqrt(alphas_cumprod)
+ * and sqrt(1 - alphas_cumprod), 1 and 0 after the last step. */
+static g3d_status after_timestep(const run *r, const float *ac, const int *ts, int i, int total, float *x)
+{
+    float a = i + 1 < total ? sqrtf(ac[ts[i + 1]]) : 1.0f, b = i + 1 < total ? sqrtf(1.0f - ac[ts[i + 1]]) : 0.0f;
+    return after_step(r, i, total, x, a, b);
+}
+
 static g3d_status need_noise(const run *r)
 {
     if (!r->noise) return G3D_ERR(G3D_ERR_ARG, "the %s sampler needs a noise source", g3d_sd_sampler_name(r->s->kind));
@@ -139,8 +147,7 @@ static g3d_status ddim(const run *r, float *x)
             }
             x[j] = (float)(sap * x0 + dir * e + (eta != 0 ? sigma * r->z[j] : 0));
         }
-        float na = i + 1 < k ? sqrtf(ac[ts[i + 1]]) : 1.0f, nb = i + 1 < k ? sqrtf(1.0f - ac[ts[i + 1]]) : 0.0f;
-        G3D_TRY(after_step(r, i, k, x, na, nb));
+        G3D_TRY(after_timestep(r, ac, ts, i, k, x));
     }
     return G3D_OK;
 }
@@ -180,8 +187,7 @@ static g3d_status plms(const run *r, float *x)
         }
         memcpy(old + (size_t)(nold % 3) * r->n, e, sizeof(float) * r->n);
         nold++;
-        float na = i + 1 < k ? sqrtf(ac[ts[i + 1]]) : 1.0f, nb = i + 1 < k ? sqrtf(1.0f - ac[ts[i + 1]]) : 0.0f;
-        rc = after_step(r, i, k, x, na, nb);
+        rc = after_timestep(r, ac, ts, i, k, x);
     }
     free(old);
     free(e);
@@ -318,8 +324,7 @@ static g3d_status pndm(const run *r, float *x)
             if (v) m = sqrt(at) * m + sqrt(bt) * s;
             x[j] = (float)(sc * s - (ap - at) * m / den);
         }
-        float na = k + 1 < calls ? sqrtf(ac[ts[k + 1]]) : 1.0f, nb = k + 1 < calls ? sqrtf(1.0f - ac[ts[k + 1]]) : 0.0f;
-        rc = after_step(r, k, calls, x, na, nb);
+        rc = after_timestep(r, ac, ts, k, calls, x);
     }
     free(ts);
     free(ets);

@@ -194,20 +194,31 @@ static void diffusers_nres(sd_ld *ld)
     while (g3d_ckpt_find(ld->ck, k) && ++ld->nres < 64);
 }
 
+/* Where a network's tensors are: under the first of the prefixes that holds both original
+ * names mark[0] and mark[1], else in diffusers' layout when the file holds its names mark[2]
+ * and mark[3]. ld->prefix stays NULL when neither. */
+static void find_layout(const g3d_ckpt *ck, const char *const *prefixes, size_t np, const char *const mark[4], sd_ld *ld,
+                        g3d_sd_unet_config *c)
+{
+    *ld = (sd_ld){ck, NULL, SD_ORIGINAL, 0, 0};
+    for (size_t i = 0; i < np && !ld->prefix; i++) {
+        sd_ld t = {ck, prefixes[i], SD_ORIGINAL, 0, 0};
+        if (sd_find(&t, mark[0]) && sd_find(&t, mark[1])) ld->prefix = t.prefix;
+    }
+    if (!ld->prefix && g3d_ckpt_find(ck, mark[2]) && g3d_ckpt_find(ck, mark[3])) {
+        ld->prefix = "";
+        ld->layout = SD_DIFFUSERS_UNET;
+        c->diffusers = 1;
+        diffusers_nres(ld);
+    }
+}
+
 g3d_status g3d_sd_unet_probe(const g3d_ckpt *ck, const char *yaml, g3d_sd_unet_config *c)
 {
+    static const char *const mark[4] = {"input_blocks.0.0.weight", "time_embed.0.weight", "conv_in.weight", "time_embedding.linear_1.weight"};
     memset(c, 0, sizeof *c);
-    sd_ld ld = {ck, NULL, SD_ORIGINAL, 0, 0};
-    for (size_t i = 0; i < sizeof UNET_PREFIXES / sizeof *UNET_PREFIXES && !ld.prefix; i++) {
-        sd_ld t = {ck, UNET_PREFIXES[i], SD_ORIGINAL, 0, 0};
-        if (sd_find(&t, "input_blocks.0.0.weight") && sd_find(&t, "time_embed.0.weight")) ld.prefix = t.prefix;
-    }
-    if (!ld.prefix && g3d_ckpt_find(ck, "conv_in.weight") && g3d_ckpt_find(ck, "time_embedding.linear_1.weight")) {
-        ld.prefix = "";
-        ld.layout = SD_DIFFUSERS_UNET;
-        c->diffusers = 1;
-        diffusers_nres(&ld);
-    }
+    sd_ld ld;
+    find_layout(ck, UNET_PREFIXES, sizeof UNET_PREFIXES / sizeof *UNET_PREFIXES, mark, &ld, c);
     if (!ld.prefix)
         return G3D_ERR(G3D_ERR_MODEL, "%s: not a Stable Diffusion UNet (missing tensor model.diffusion_model.input_blocks.0.0.weight)",
                        g3d_ckpt_path(ck));
@@ -222,19 +233,12 @@ static const char *const CONTROL_PREFIXES[] = {"control_model.", ""};
 
 g3d_status g3d_sd_controlnet_probe(const g3d_ckpt *ck, const char *config, g3d_sd_controlnet_config *cc)
 {
+    static const char *const mark[4] = {"input_hint_block.0.weight", "input_blocks.0.0.weight",
+                                        "controlnet_cond_embedding.conv_in.weight", "conv_in.weight"};
     memset(cc, 0, sizeof *cc);
     g3d_sd_unet_config *c = &cc->net;
-    sd_ld ld = {ck, NULL, SD_ORIGINAL, 0, 0};
-    for (size_t i = 0; i < sizeof CONTROL_PREFIXES / sizeof *CONTROL_PREFIXES && !ld.prefix; i++) {
-        sd_ld t = {ck, CONTROL_PREFIXES[i], SD_ORIGINAL, 0, 0};
-        if (sd_find(&t, "input_hint_block.0.weight") && sd_find(&t, "input_blocks.0.0.weight")) ld.prefix = t.prefix;
-    }
-    if (!ld.prefix && g3d_ckpt_find(ck, "controlnet_cond_embedding.conv_in.weight") && g3d_ckpt_find(ck, "conv_in.weight")) {
-        ld.prefix = "";
-        ld.layout = SD_DIFFUSERS_UNET;
-        c->diffusers = 1;
-        diffusers_nres(&ld);
-    }
+    sd_ld ld;
+    find_layout(ck, CONTROL_PREFIXES, sizeof CONTROL_PREFIXES / sizeof *CONTROL_PREFIXES, mark, &ld, c);
     if (!ld.prefix)
         return G3D_ERR(G3D_ERR_MODEL, "%s: not a ControlNet (missing tensor control_model.input_hint_block.0.weight)", g3d_ckpt_path(ck));
     G3D_TRY(probe_encoder(&ld, c));
