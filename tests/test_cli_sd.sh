@@ -93,4 +93,7 @@ no_out "a ControlNet of another UNet"
 expect 2 "--prefill-lama without --controlnet" "$GEN3D" inpaint -m "$M" $PARTS --prefill-lama "$FIX/lama_tiny.ckpt" -i "$T/a.png" \
     --mask "$T/c.png" -p x -o "$T/bad.png"
 no_out "--prefill-lama without --controlnet"
+expect 2 "--control-scale without --controlnet" "$GEN3D" inpaint -m "$M" $PARTS --control-scale 0.5 -i "$T/a.png" --mask "$T/c.png" \
+    -p x -o "$T/bad.png"
+no_out "--control-scale without --controlnet"
 finish

@@ -216,7 +216,8 @@ int g3d_sd_cli_inpaint(int argc, char **argv)
     int rc = sd_cli_params(&c, &p, "inpaint");
     if (rc) return rc;
     if (!c.image || !c.mask) return g3d_cli_errorf(G3D_EXIT_USAGE, "-i IMAGE and --mask MASK are required");
-    if (c.prefill_lama && !c.paths.controlnet) return g3d_cli_errorf(G3D_EXIT_USAGE, "--prefill-lama fills the hint of a --controlnet");
+    if ((c.prefill_lama || c.control_scale != 1.0) && !c.paths.controlnet)
+        return g3d_cli_errorf(G3D_EXIT_USAGE, "%s is for a --controlnet", c.prefill_lama ? "--prefill-lama" : "--control-scale");
     if (!(c.control_scale >= 0 && c.control_scale <= 10)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--control-scale must be 0 to 10");
     p.control_scale = (float)c.control_scale;
     g3d_image img = {0}, mask = {0}, out = {0}, hint = {0};
