@@ -35,6 +35,9 @@ if command -v script >/dev/null 2>&1; then
 fi
 expect 0 "another seed" t2i -s 4 --sampler dpmpp_2m --karras -o "$T/c.png"
 cmp -s "$T/a.png" "$T/c.png" && bad "another seed, same bytes" || ok "another seed, another picture"
+expect 0 "ldm's PLMS" t2i -s 3 --sampler plms -o "$T/p.png"
+cmp -s "$T/a.png" "$T/p.png" && bad "plms gave DDIM's picture" || ok "plms: another sampler, another picture"
+expect 2 "--karras with plms" t2i --sampler plms --karras -o "$T/bad.png"
 expect 0 "--noise instead of the seed" t2i -s 1 --noise "$FIX/sdpipe_noise.npy" -o "$T/n1.png"
 expect 0 "--noise, another seed" t2i -s 2 --noise "$FIX/sdpipe_noise.npy" -o "$T/n2.png"
 cmp -s "$T/n1.png" "$T/n2.png" && ok "the given noise decides" || bad "--noise ignored"
@@ -43,6 +46,26 @@ cmp -s "$T/n1.png" "$T/n2.png" && ok "the given noise decides" || bad "--noise i
 # inpainting with a text-to-image model: latent blending, said on stderr
 expect 0 "inpaint (fallback)" "$GEN3D" inpaint -m "$M" $PARTS -i "$T/a.png" --mask "$T/c.png" -p "$PROMPT" --steps 3 -o "$T/i.png"
 grep -q "latent blending" "$T/err" && ok "the fallback is named" || bad "no word of the fallback"
+
+# a 9-channel inpainting model from the official run's noise: no fallback
+expect 0 "inpaint (9-channel model, --noise)" "$GEN3D" inpaint -m "$FIX/sdinpaint_unet_tiny.safetensors" $PARTS -i "$FIX/sdinpaint_image.png" \
+    --mask "$FIX/sdinpaint_mask.png" -p "$PROMPT" --steps 10 --noise "$FIX/sdinpaint_noise.npy" -o "$T/i9.png"
+grep -q "latent blending" "$T/err" && bad "a fallback for an inpainting model" || ok "no fallback"
+
+# the inpainting ControlNet (fitting the 9-channel model), its hint as the official demo makes it or prefilled by LaMa
+M9="$FIX/sdinpaint_unet_tiny.safetensors"
+# shellcheck disable=SC2086
+i9() { "$GEN3D" inpaint -m "$M9" $PARTS -i "$FIX/sdinpaint_image.png" --mask "$FIX/sdinpaint_mask.png" -p "$PROMPT" --steps 3 "$@"; }
+expect 0 "info names a ControlNet" "$GEN3D" info "$FIX/sdcontrol_tiny.pth"
+grep -q "ControlNet for SD 1.x (hint 3 channels at 8x the latent; .*model channels 32, multipliers 1/1.*context 128" "$T/out" \
+    && ok "ControlNet configuration" || bad "info: $(head -1 "$T/out")"
+expect 0 "inpaint without a ControlNet" i9 -o "$T/ipl.png"
+expect 0 "inpaint with a ControlNet" i9 --controlnet "$FIX/sdcontrol_tiny.pth" -o "$T/icn.png"
+cmp -s "$T/ipl.png" "$T/icn.png" && bad "the ControlNet changed nothing" || ok "the ControlNet changes the picture"
+expect 0 "control scale 0" i9 --controlnet "$FIX/sdcontrol_tiny.pth" --control-scale 0 -o "$T/icn0.png"
+cmp -s "$T/ipl.png" "$T/icn0.png" && ok "scale 0: the plain model's picture" || bad "scale 0 differs from no ControlNet"
+expect 0 "inpaint with a LaMa-prefilled hint" i9 --controlnet "$FIX/sdcontrol_tiny.pth" --prefill-lama "$FIX/lama_tiny.ckpt" -o "$T/ilama.png"
+cmp -s "$T/icn.png" "$T/ilama.png" && bad "the prefill changed nothing" || ok "the prefill changes the picture"
 
 # bad input: one line, non-zero exit, no output
 no_out() { [ ! -e "$T/bad.png" ] && ok "$1: no output" || { bad "$1: output written"; rm -f "$T/bad.png"; }; }
@@ -67,4 +90,18 @@ expect 1 "NaN weights" "$GEN3D" txt2img -m "$T/nan.safetensors" $PARTS -p x -W 2
 grep -q "NaN" "$T/err" && ok "the NaN tensor named" || bad "NaN: $(cat "$T/err")"
 no_out "NaN weights"
 [ "$(grep -c "error" "$T/err")" -eq 1 ] && ok "one error line" || bad "error lines: $(cat "$T/err")"
+expect 1 "not a ControlNet" "$GEN3D" inpaint -m "$M" $PARTS --controlnet "$FIX/sdunet_sd1_tiny.ckpt" -i "$T/a.png" --mask "$T/c.png" \
+    -p x -o "$T/bad.png"
+grep -q "sdunet_sd1_tiny.ckpt: not a ControlNet" "$T/err" && ok "the file named" || bad "not a ControlNet: $(cat "$T/err")"
+no_out "not a ControlNet"
+expect 1 "a ControlNet of another UNet" "$GEN3D" inpaint -m "$M" $PARTS --controlnet "$FIX/sdcontrol_tiny.pth" -i "$T/a.png" \
+    --mask "$T/c.png" -p x -o "$T/bad.png"
+grep -q "sdcontrol_tiny.pth: the ControlNet (.*) does not fit the UNet" "$T/err" && ok "the misfit named" || bad "misfit: $(cat "$T/err")"
+no_out "a ControlNet of another UNet"
+expect 2 "--prefill-lama without --controlnet" "$GEN3D" inpaint -m "$M" $PARTS --prefill-lama "$FIX/lama_tiny.ckpt" -i "$T/a.png" \
+    --mask "$T/c.png" -p x -o "$T/bad.png"
+no_out "--prefill-lama without --controlnet"
+expect 2 "--control-scale without --controlnet" "$GEN3D" inpaint -m "$M" $PARTS --control-scale 0.5 -i "$T/a.png" --mask "$T/c.png" \
+    -p x -o "$T/bad.png"
+no_out "--control-scale without --controlnet"
 finish

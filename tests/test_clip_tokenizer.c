@@ -156,6 +156,49 @@ TEST(hugging_face_layout)
     free(dir);
 }
 
+/* ftfy's mojibake repair (tests/fixtures/make_cliptok_mojibake_fixture.py): prompts that were
+ * UTF-8 read as Windows-1252 or Latin-1, once or twice, with 0xA0 bytes turned into spaces, and
+ * correct non-ASCII prompts that stay: both clean-ups and the ids. */
+TEST(mojibake)
+{
+    unsigned char *d = NULL;
+    size_t n;
+    CHECK_OK(g3d_read_file(test_fixture("cliptok_mojibake.json"), 1 << 20, &d, &n));
+    cJSON *j = d ? cJSON_Parse((const char *)d) : NULL;
+    free(d);
+    g3d_clip_tokenizer *t = NULL;
+    CHECK_OK(g3d_clip_tokenizer_load(test_fixture("cliptok_merges.txt.gz"), &t));
+    int ncase = 0, ok = 0, repaired = 0;
+    const cJSON *c;
+    cJSON_ArrayForEach(c, cJSON_GetObjectItem(j, "cases"))
+    {
+        const char *text = cJSON_GetObjectItem(c, "text")->valuestring;
+        const char *want[2] = {cJSON_GetObjectItem(c, "clean")->valuestring, cJSON_GetObjectItem(c, "hf_clean")->valuestring};
+        int good = 1;
+        ncase++;
+        for (int k = 0; k < 2; k++) {
+            char *cl = NULL;
+            CHECK_OK(g3d_clip_clean_text(text, k ? G3D_CLIP_CLEAN_HF_FTFY : G3D_CLIP_CLEAN_OFFICIAL, &cl));
+            if (!cl || strcmp(cl, want[k])) {
+                printf("  %s clean-up of \"%.40s\": got \"%.60s\", expected \"%.60s\"\n", k ? "HF" : "official", text, cl ? cl : "", want[k]);
+                good = 0;
+            }
+            free(cl);
+        }
+        int32_t *ids = NULL;
+        int m = 0;
+        if (t) CHECK_OK(g3d_clip_encode(t, text, &ids, &m));
+        good &= ids && same_ids("BPE ids", text, ids, m, cJSON_GetObjectItem(c, "ids"), NULL);
+        free(ids);
+        ok += good;
+        repaired += strchr(text, 0xC3) && !strchr(want[0], 0xC3);   /* an "Ã" gone */
+    }
+    printf("  %d prompts (%d with an \"Ã\" repaired): %d identical\n", ncase, repaired, ok);
+    CHECK(ncase >= 30 && ok == ncase && repaired >= 10);
+    g3d_clip_tokenizer_free(t);
+    cJSON_Delete(j);
+}
+
 TEST(bad_input)
 {
     g3d_clip_tokenizer *t = NULL;
@@ -185,6 +228,7 @@ int main(void)
     g_cases = load_cases();
     RUN(official_layout);
     RUN(hugging_face_layout);
+    RUN(mojibake);
     RUN(bad_input);
     cJSON_Delete(g_cases);
     return test_summary();

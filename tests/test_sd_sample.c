@@ -1,5 +1,5 @@
 /* The samplers against their reference code (tests/fixtures/make_sdsample_golden.py): ldm's
- * DDIM (epsilon, and v with eta 0.5) and k-diffusion's Euler, Euler ancestral and DPM++ 2M on
+ * DDIM (epsilon, and v with eta 0.5) and PLMS, k-diffusion's Euler, Euler ancestral and DPM++ 2M on
  * the discrete and Karras sigmas, diffusers' PNDM, each a whole denoising trajectory of the tiny SD 1.x UNet from
  * the recorded initial noise with classifier-free guidance; their schedules; refusals. */
 #include "golden.h"
@@ -65,9 +65,9 @@ static void check_run(const char *run, g3d_sd_sampler_kind kind, int nsteps, int
     float *z = g3d_ckpt_find(g_act, name) ? golden_floats(g_act, name, &nz) : NULL;
     printf("  %s\n", run);
     /* the schedule */
-    if (kind == G3D_SD_DDIM || kind == G3D_SD_PNDM) {
+    if (kind == G3D_SD_DDIM || kind == G3D_SD_PNDM || kind == G3D_SD_PLMS) {
         int ts[G3D_SD_TRAIN_STEPS];
-        int k = kind == G3D_SD_DDIM ? g3d_sd_ddim_timesteps(nsteps, ts) : g3d_sd_pndm_timesteps(nsteps, ts);
+        int k = kind != G3D_SD_PNDM ? g3d_sd_ddim_timesteps(nsteps, ts) : g3d_sd_pndm_timesteps(nsteps, ts);
         snprintf(name, sizeof name, "%s.timesteps", run);
         const g3d_tensor_info *t = g3d_ckpt_find(g_act, name);
         CHECK(t && t->numel == k && !memcmp(t->data, ts, sizeof(int) * (size_t)k));
@@ -113,14 +113,28 @@ TEST(pndm)
     check_run("pndm_v", G3D_SD_PNDM, 6, 0, G3D_SD_PRED_V, 0, 3.0f);
 }
 
+TEST(plms)
+{
+    check_run("plms_eps", G3D_SD_PLMS, 10, 0, G3D_SD_PRED_EPS, 0, 7.5f);
+    check_run("plms_eps7", G3D_SD_PLMS, 7, 0, G3D_SD_PRED_EPS, 0, 3.0f);
+}
+
 TEST(names_and_refusals)
 {
     CHECK(g3d_sd_sampler_parse("euler_a") == G3D_SD_EULER_A && g3d_sd_sampler_parse("dpm++2m") == G3D_SD_DPMPP_2M &&
-          g3d_sd_sampler_parse("plms") == -1);
+          g3d_sd_sampler_parse("plms") == G3D_SD_PLMS && g3d_sd_sampler_parse("lms") == -1);
     float x[4 * 8 * 12] = {0};
     guided g = {x, x, 1, 0};
     g3d_sd_sampler s = {G3D_SD_EULER_A, 4, 0, 0, G3D_SD_PRED_EPS};
     CHECK_FAILS(g3d_sd_sample(&s, x, 4 * 8 * 12, model, &g, NULL, NULL, NULL, NULL));   /* ancestral without noise */
+    /* ldm's PLMS: noise prediction and eta 0 only */
+    s.kind = G3D_SD_PLMS;
+    s.pred = G3D_SD_PRED_V;
+    CHECK_FAILS(g3d_sd_sample(&s, x, 4 * 8 * 12, model, &g, NULL, NULL, NULL, NULL));
+    s.pred = G3D_SD_PRED_EPS;
+    s.eta = 0.5f;
+    CHECK_FAILS(g3d_sd_sample(&s, x, 4 * 8 * 12, model, &g, NULL, NULL, NULL, NULL));
+    s.eta = 0;
     s.kind = G3D_SD_EULER;
     s.steps = 0;
     CHECK_FAILS(g3d_sd_sample(&s, x, 4 * 8 * 12, model, &g, NULL, NULL, NULL, NULL));
@@ -137,6 +151,7 @@ int main(void)
         RUN(ddim);
         RUN(k_diffusion);
         RUN(pndm);
+        RUN(plms);
         RUN(names_and_refusals);
     }
     g3d_sd_unet_free(g_unet);

@@ -11,8 +11,9 @@
  *   g3d_clip_text_forward(enc, ids, 77, emb, NULL);     // [77, width], the UNet's context
  *
  * TOKENIZER. The text is cleaned as OpenAI CLIP's and OpenCLIP's simple_tokenizer do: ftfy's
- * fix_text (HTML entities, Windows-1252 C1 characters, Latin ligatures, full-width forms, curly
- * quotes, line breaks, terminal escapes, control characters, NFC; not its mojibake repair),
+ * fix_text (HTML entities, UTF-8 mojibake read as Windows-1252 or Latin-1 (not ftfy's other
+ * code pages), Windows-1252 C1 characters, Latin ligatures, full-width forms, curly quotes,
+ * line breaks, terminal escapes, control characters, NFC),
  * html.unescape twice, white space collapsed and trimmed, Python's lower() (full mappings,
  * final sigma). Hugging Face's CLIPTokenizer, with ftfy installed, does the same less the
  * html.unescape passes (G3D_CLIP_CLEAN_HF_FTFY; docs/text.md says what it does without ftfy). Then the pre-tokenisation pattern, UTF-8 bytes mapped to

@@ -25,6 +25,8 @@ typedef enum g3d_model_kind {
     G3D_MODEL_SAM,               /* Segment Anything: image_encoder.*, prompt_encoder.*, mask_decoder.* */
     G3D_MODEL_STABLE_DIFFUSION,  /* a latent-diffusion UNet (model.diffusion_model.*, sd.h), with
                                     or without its VAE and text encoder */
+    G3D_MODEL_CONTROLNET,        /* a ControlNet for the UNet (control_model.*, or diffusers'
+                                    ControlNetModel; sd.h) */
     G3D_MODEL_KIND_COUNT
 } g3d_model_kind;
 

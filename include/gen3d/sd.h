@@ -95,6 +95,52 @@ typedef void (*g3d_sd_trace_fn)(void *ctx, const char *name, const float *x, int
 g3d_status g3d_sd_unet_forward(const g3d_sd_unet *m, const float *x, int h, int w, float t, const float *ctx,
                                int nctx, float *out, g3d_sd_trace_fn trace, void *trace_ctx);
 
+/* ---- ControlNet ------------------------------------------------------------------------- */
+/* ControlNet (lllyasviel's cldm ControlNet, e.g. control_v11p_sd15_inpaint.pth): a copy of the
+ * UNet's encoder and middle block whose input gets a hint picture (through input_hint_block:
+ * eight 3x3 convolutions with SiLU between them, three of stride 2, so the hint is 8 times the
+ * latent's size) added after the first convolution, and a 1x1 "zero" convolution after every
+ * input block and the middle block. Their outputs, times a control scale, are added to the
+ * UNet's skip connections and to its middle block's output (cldm's ControlledUnetModel). */
+#define G3D_SD_HINT_FACTOR 8
+
+typedef struct g3d_sd_controlnet_config {
+    g3d_sd_unet_config net;  /* its encoder's configuration (out_ch 0); prefix "control_model." or "" */
+    int hint_ch;             /* channels of the hint picture (3) */
+} g3d_sd_controlnet_config;
+
+typedef struct g3d_sd_controlnet g3d_sd_controlnet;
+
+/* Reads a ControlNet's configuration from an open checkpoint: the published original layout
+ * (control_model.*, or the same names bare) or diffusers' ControlNetModel
+ * (diffusion_pytorch_model.safetensors; config, when not NULL, is its config.json text). The
+ * head split follows the UNet's rules (SD 1.x: 8 heads; SD 2.x: heads of 64 channels).
+ * G3D_ERR_MODEL naming the first missing tensor when the file is not a ControlNet. */
+g3d_status g3d_sd_controlnet_probe(const g3d_ckpt *ck, const char *config, g3d_sd_controlnet_config *c);
+/* Loads it (the checkpoint must outlive it). Free with g3d_sd_controlnet_free. */
+g3d_status g3d_sd_controlnet_load(const g3d_ckpt *ck, const char *config, g3d_sd_controlnet **out);
+void g3d_sd_controlnet_free(g3d_sd_controlnet *m);
+const g3d_sd_controlnet_config *g3d_sd_controlnet_get_config(const g3d_sd_controlnet *m);
+/* "ControlNet for SD 1.x (hint 3 channels at 8x the latent; 4 input channels, ...)" into buf. */
+const char *g3d_sd_controlnet_describe(const g3d_sd_controlnet_config *c, char *buf, size_t n);
+/* G3D_OK when the ControlNet's residuals fit the UNet (model channels, levels, multipliers, res
+ * blocks and context width alike); else G3D_ERR_MODEL, one line naming `path` and both models'
+ * figures (an SD 2.x ControlNet given with an SD 1.5 UNet, ...). */
+g3d_status g3d_sd_controlnet_check(const g3d_sd_controlnet_config *cn, const char *path, const g3d_sd_unet_config *unet);
+/* Floats of the residuals for a latent of h x w: every input block's map, then the middle's. */
+size_t g3d_sd_controlnet_residual_floats(const g3d_sd_controlnet *m, int h, int w);
+/* residuals = scale x the ControlNet's outputs for the latent x [in_ch, h, w] at timestep t with
+ * the context ctx [nctx, context_dim] and the hint [hint_ch, 8h, 8w]. trace (may be NULL)
+ * receives "temb", "guided_hint" (the hint block's output) and "control<i>" (unscaled). */
+g3d_status g3d_sd_controlnet_forward(const g3d_sd_controlnet *m, const float *x, int h, int w, float t, const float *ctx,
+                                     int nctx, const float *hint, float scale, float *residuals, g3d_sd_trace_fn trace,
+                                     void *trace_ctx);
+/* g3d_sd_unet_forward with a ControlNet's residuals (from g3d_sd_controlnet_forward for the same
+ * h x w, checked to fit with g3d_sd_controlnet_check) added to the skip connections and to the
+ * middle block's output; residuals NULL: the plain UNet. */
+g3d_status g3d_sd_unet_forward_controlled(const g3d_sd_unet *m, const float *x, int h, int w, float t, const float *ctx,
+                                          int nctx, const float *residuals, float *out, g3d_sd_trace_fn trace, void *trace_ctx);
+
 /* ---- VAE -------------------------------------------------------------------------------- */
 
 typedef struct g3d_sd_vae_config {
@@ -143,10 +189,12 @@ typedef enum g3d_sd_sampler_kind {
                         evaluates the second timestep twice: N + 1 model calls), "leading" timesteps
                         1000/N apart from 1, diffusers' float32 schedule; the default of SD 1.5's
                         diffusers pipeline */
+    G3D_SD_PLMS,     /* ldm's PLMSSampler: DDIM's timesteps, a pseudo improved Euler first step (N + 1 model
+                        calls), then Adams-Bashforth of order 2 to 4; epsilon models, eta 0 */
     G3D_SD_SAMPLER_COUNT
 } g3d_sd_sampler_kind;
 
-/* "ddim", "euler", "euler_a", "dpmpp_2m" (also "dpm++2m"), "pndm"; -1 if unknown. */
+/* "ddim", "euler", "euler_a", "dpmpp_2m" (also "dpm++2m"), "pndm", "plms"; -1 if unknown. */
 int g3d_sd_sampler_parse(const char *name);
 const char *g3d_sd_sampler_name(g3d_sd_sampler_kind k);
 
@@ -205,13 +253,15 @@ typedef struct g3d_sd_paths {
     const char *tokenizer;    /* clip_text.h's g3d_clip_tokenizer_load path; NULL: the default vocabulary */
     const char *yaml;         /* the original configuration; NULL: <model>.yaml when it exists */
     int prediction;           /* -1: from the configuration (else epsilon), or a g3d_sd_pred */
+    const char *controlnet;   /* a ControlNet (its .pth / .safetensors, or a diffusers folder), or NULL */
 } g3d_sd_paths;
 
 typedef struct g3d_sd g3d_sd;
 
-/* Loads the UNet, the VAE, the text encoder and the tokenizer; refuses parts that do not fit
- * together (the text width must be the UNet's context width) and weights that are not finite
- * (naming the tensor). The model's files stay mapped until g3d_sd_free. */
+/* Loads the UNet, the VAE, the text encoder, the tokenizer and the ControlNet when one is given;
+ * refuses parts that do not fit together (the text width must be the UNet's context width, the
+ * ControlNet must fit the UNet) and weights that are not finite (naming the tensor). The
+ * model's files stay mapped until g3d_sd_free. */
 g3d_status g3d_sd_load(const g3d_sd_paths *p, g3d_sd **out);
 void g3d_sd_free(g3d_sd *m);
 const g3d_sd_unet_config *g3d_sd_get_unet(const g3d_sd *m);
@@ -229,12 +279,26 @@ typedef struct g3d_sd_params {
     float cfg;                /* classifier-free guidance scale (1: the prompt alone, one pass a step) */
     uint64_t seed;            /* the initial noise (and ancestral noise) */
     const float *noise;       /* the initial latent noise [z_ch, height/f, width/f] instead of the seed's, or NULL */
+    const g3d_image *control; /* the ControlNet's hint, (8 width/f) x (8 height/f) (the picture's size for SD),
+                                 hint_ch channels; NULL: inpainting builds the inpainting hint itself */
+    float control_scale;      /* the ControlNet's residuals are multiplied by this (1) */
     g3d_progress progress;    /* stage "denoise": step, total */
     int truncated;            /* out: prompt tokens dropped because they did not fit (both prompts) */
     int fallback;             /* out, inpainting: 1 when a text-to-image model inpainted by latent blending */
 } g3d_sd_params;
 
-/* DDIM 50 steps, guidance 7.5, 512 x 512, seed 0. */
+/* The ControlNet loaded with the model, or NULL. */
+const g3d_sd_controlnet *g3d_sd_get_controlnet(const g3d_sd *m);
+
+/* The inpainting ControlNet's hint (control_v11p_sd15_inpaint), w x h x 3 (allocated): the
+ * picture (RGB in [0, 1]) with its masked pixels (mask > 0.5) set to -1, as the official v1.1
+ * inpainting demo builds it; or, when prefill (the same size as the picture) is not NULL, the
+ * masked pixels taken from it (a picture already filled, e.g. by LaMa). A size other than the
+ * picture's is sampled nearest. */
+g3d_status g3d_sd_inpaint_hint(const g3d_image *image, const g3d_image *mask, const g3d_image *prefill, int w, int h,
+                               g3d_image *hint);
+
+/* DDIM 50 steps, guidance 7.5, 512 x 512, seed 0, control scale 1. */
 g3d_sd_params g3d_sd_defaults(void);
 
 /* A picture for the prompt: out (allocated, RGB in [0, 1], width x height) from the VAE's
@@ -247,8 +311,10 @@ g3d_status g3d_sd_txt2img(const g3d_sd *m, g3d_sd_params *p, g3d_image *out);
  * latent of the masked picture, as ldm's inpainting scripts build them (the masked picture's
  * latent is the posterior mean). A text-to-image model inpaints by latent blending: after
  * every step the unmasked latent is replaced by the picture's latent noised to the next
- * level (p->fallback is set). Then the known pixels are pasted back at full resolution with a
- * seam feathered over 8 pixels inside the mask, so pixels outside the mask are unchanged. */
+ * level (p->fallback is set). With a ControlNet loaded, its residuals join every UNet pass (the
+ * unconditional one too, as cldm does); p->control NULL gives it g3d_sd_inpaint_hint's hint
+ * without prefill. Then the known pixels are pasted back at full resolution with a seam
+ * feathered over 8 pixels inside the mask, so pixels outside the mask are unchanged. */
 g3d_status g3d_sd_inpaint(const g3d_sd *m, g3d_sd_params *p, const g3d_image *image, const g3d_image *mask,
                           g3d_image *out);
 

@@ -1,5 +1,5 @@
-/* CLIP's byte-level BPE tokenizer: the official text clean-up (ftfy's fix_text without its
- * mojibake repair, html.unescape twice, white space, Python's lower()), the pre-tokenisation
+/* CLIP's byte-level BPE tokenizer: the official text clean-up (ftfy's fix_text with the common
+ * case of its mojibake repair, html.unescape twice, white space, Python's lower()), the pre-tokenisation
  * pattern, the byte-to-character map, BPE merges and the framing. Unicode tables:
  * clip_unicode.inc, written by scripts/gen_clip_unicode.py. */
 #include "gen3d/clip_text.h"
@@ -347,8 +347,107 @@ static void nfc(const cpbuf *in, cpbuf *out)
 }
 
 /* ======================================================================================
- * ftfy's fix_text (its default fixes, less the mojibake repair)
+ * ftfy's fix_text (its default fixes; of the mojibake repair, UTF-8 read as Latin-1 or
+ * Windows-1252)
  * ==================================================================================== */
+static int cp_equal(const cpbuf *a, const cpbuf *b)
+{
+    return a->n == b->n && (a->n == 0 || !memcmp(a->v, b->v, a->n * sizeof *a->v));
+}
+
+/* The text as bytes of Latin-1 (every character up to U+00FF) or of ftfy's sloppy Windows-1252
+ * (its 27 characters at 0x80..0x9F, the five bytes it leaves undefined as the C1 controls of
+ * the same value); 0 when some character has no byte. */
+static int encode_1byte(const cpbuf *in, int sloppy, unsigned char *out)
+{
+    for (size_t i = 0; i < in->n; i++) {
+        uint32_t c = in->v[i];
+        int b = -1;
+        if (c < 0x80 || (c >= 0xA0 && c <= 0xFF) || (!sloppy && c <= 0xFF)) b = (int)c;
+        for (int k = 0; sloppy && b < 0 && k < 32; k++)
+            if (clip_cp1252_c1[k] == c) b = 0x80 + k;
+        /* the sloppy codecs read byte 0x1A as U+FFFD, so U+001A has no byte there (and
+         * U+FFFD, whose lossy sequences are not repaired here, is left alone too) */
+        if (b < 0 || (sloppy && c == 0x1A)) return 0;
+        out[i] = (unsigned char)b;
+    }
+    return 1;
+}
+
+static int in_range(unsigned char b, unsigned lo, unsigned hi) { return b >= lo && b <= hi; }
+/* [\x80-\x84\x86-\x9f\xa1-\xbf]: a continuation byte that a single-byte decoding does not
+ * turn into a space-like character */
+static int cont_kept(unsigned char b) { return in_range(b, 0x80, 0xBF) && b != 0x85 && b != 0xA0; }
+
+/* Length of ftfy's ALTERED_UTF8_RE match at s[i] (its alternatives in order: a UTF-8 sequence
+ * whose 0xA0 byte became a space), or 0. */
+static size_t altered_utf8(const unsigned char *s, size_t n, size_t i)
+{
+    const unsigned char *p = s + i;
+    size_t r = n - i;
+    if (r >= 2 && (p[0] == 0xC2 || p[0] == 0xC3 || p[0] == 0xC5 || p[0] == 0xCE || p[0] == 0xD0 || p[0] == 0xD9) && p[1] == ' ')
+        return 2;
+    if (r >= 3 && (p[0] == 0xE2 || p[0] == 0xE3) && p[1] == ' ' && cont_kept(p[2])) return 3;
+    if (r >= 3 && in_range(p[0], 0xE0, 0xE3) && cont_kept(p[1]) && p[2] == ' ') return 3;
+    if (r >= 4 && p[0] == 0xF0) {
+        int sp = (p[1] == ' ') + (p[2] == ' ') + (p[3] == ' ');
+        int cont = in_range(p[1], 0x80, 0xBF) + in_range(p[2], 0x80, 0xBF) + in_range(p[3], 0x80, 0xBF);
+        if (sp == 1 && cont == 2) return 4;
+    }
+    return 0;
+}
+
+/* ftfy's restore_byte_a0 on b[n] into out (room for 2n bytes); returns the new length. First
+ * the word "à" whose 0xA0 byte was lost with the space ("voilÃ le": C3 then a space, unless
+ * followed by a space, "quele", "quela", "quilo" or "s ", becomes C3 A0 and the space), then
+ * the spaces inside altered_utf8's sequences become 0xA0. */
+static size_t restore_a0(const unsigned char *b, size_t n, unsigned char *out)
+{
+    static const char *const keep[] = {" ", "quele", "quela", "quilo", "s "};
+    size_t m = 0;
+    for (size_t i = 0; i < n; i++) {
+        out[m++] = b[i];
+        if (b[i] != 0xC3 || i + 1 >= n || b[i + 1] != ' ') continue;
+        int word = 1;
+        for (size_t k = 0; k < sizeof keep / sizeof *keep; k++) {
+            size_t l = strlen(keep[k]);
+            if (i + 2 + l <= n && !memcmp(b + i + 2, keep[k], l)) word = 0;
+        }
+        if (word) out[m++] = 0xA0;
+    }
+    for (size_t i = 0; i < m;) {
+        size_t a = altered_utf8(out, m, i);
+        for (size_t k = i; k < i + a; k++)
+            if (out[k] == ' ') out[k] = 0xA0;
+        i += a ? a : 1;
+    }
+    return m;
+}
+
+/* One step of ftfy's fix_encoding for the case that matters for prompts: text that was UTF-8
+ * but was decoded as Latin-1 or Windows-1252 ("cafÃ©", "donâ€™t"). The text, re-encoded as
+ * Latin-1 or else as sloppy Windows-1252 (ftfy's order), with ftfy's restore_byte_a0 (a space
+ * where a 0xA0 byte of a UTF-8 sequence was, "voilÃ le"), must decode as UTF-8 in full; then
+ * the decoded text replaces it. 1 when out holds a repaired text. ftfy first asks its badness
+ * heuristic whether the text looks like mojibake at all; here text that decodes as UTF-8 in
+ * full counts as mojibake. Not done: the other single-byte encodings ftfy tries (Windows-1250,
+ * 1251, 1253, 1254, ISO-8859-2, MacRoman, CP437), sequences whose bytes were lost (U+FFFD),
+ * Java's and CESU-8's variants of UTF-8, and mojibake mixed with correct non-ASCII text in one
+ * line (decode_inconsistent_utf8). */
+static int fix_mojibake(const cpbuf *in, cpbuf *out)
+{
+    int ascii = 1;
+    for (size_t i = 0; i < in->n; i++) ascii &= in->v[i] < 0x80;
+    unsigned char *b = ascii ? NULL : malloc(3 * in->n + 1), *r = b ? b + in->n : NULL;
+    int fixed = 0;
+    for (int sloppy = 0; b && sloppy < 2 && !fixed; sloppy++) {
+        if (!encode_1byte(in, sloppy, b)) continue;
+        size_t m = restore_a0(b, in->n, r);
+        if (utf8_decode(r, m, NULL) == 0) fixed = utf8_decode(r, m, out) == 0;
+    }
+    free(b);
+    return fixed;
+}
 /* The per-character fixes, in ftfy's order: C1 controls as Windows-1252, Latin ligatures,
  * full/half-width forms, curly quotes, line breaks, terminal escapes, control characters. */
 static void ftfy_chars(const cpbuf *in, cpbuf *out)
@@ -399,10 +498,6 @@ static void ftfy_chars(const cpbuf *in, cpbuf *out)
     cp_free(&b);
 }
 
-static int cp_equal(const cpbuf *a, const cpbuf *b)
-{
-    return a->n == b->n && (a->n == 0 || !memcmp(a->v, b->v, a->n * sizeof *a->v));
-}
 
 /* fix_text works line by line ('\n' kept with its line); once a line holds '<', HTML entities
  * are left alone in it and in every later line. Each line is fixed until nothing changes. */
@@ -422,6 +517,19 @@ static void ftfy_fix_text(const cpbuf *in, cpbuf *out)
             cpbuf a = {0}, b = {0}, c = {0};
             if (unescape) ftfy_unescape(&seg, &a);
             else for (size_t i = 0; i < seg.n; i++) cp_push(&a, seg.v[i]);
+            /* fix_encoding: repaired until it stops changing (mojibake made twice) */
+            for (int k = 0; k < 16; k++) {
+                cpbuf r = {0};
+                int changed = fix_mojibake(&a, &r) && !cp_equal(&r, &a);
+                a.oom |= r.oom;
+                if (changed) {
+                    cp_free(&a);
+                    a = r;
+                } else {
+                    cp_free(&r);
+                    break;
+                }
+            }
             ftfy_chars(&a, &b);
             nfc(&b, &c);
             int same = cp_equal(&c, &seg);

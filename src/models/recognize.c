@@ -24,6 +24,8 @@ g3d_model_kind g3d_model_recognize(const g3d_ckpt *ck)
     if (cJSON_IsObject(cJSON_GetObjectItemCaseSensitive(g3d_ckpt_meta(ck), "model_config"))) return G3D_MODEL_MOGE;
     if (g3d_ckpt_find(ck, "pretrained.blocks.0.attn.qkv.weight") && g3d_ckpt_find(ck, "depth_head.scratch.output_conv2.2.weight"))
         return G3D_MODEL_DEPTH_ANYTHING_V2;
+    g3d_sd_controlnet_config cn;
+    if (g3d_sd_controlnet_probe(ck, NULL, &cn) == G3D_OK) return G3D_MODEL_CONTROLNET;
     g3d_sd_unet_config unet;
     if (g3d_sd_unet_probe(ck, NULL, &unet) == G3D_OK) return G3D_MODEL_STABLE_DIFFUSION;
     g3d_clip_text_config clip;
@@ -130,6 +132,9 @@ const char *g3d_model_describe(const g3d_ckpt *ck, char *buf, size_t n)
                  bc.vis_layers, bc.width, bc.layers);
         return buf;
     }
+    /* a ControlNet (before the UNet: ControlNet 1.0 files carry a whole model beside it) */
+    g3d_sd_controlnet_config cn;
+    if (g3d_sd_controlnet_probe(ck, NULL, &cn) == G3D_OK) return g3d_sd_controlnet_describe(&cn, buf, n);
     g3d_error_clear();
     /* a Stable Diffusion UNet, with the VAE and the text encoder when the file holds them */
     g3d_sd_unet_config unet;

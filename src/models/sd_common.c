@@ -48,6 +48,13 @@ static int unet_key(const sd_ld *ld, const char *name, char *out, size_t n)
     if (!strncmp(name, "out.0.", 6)) return snprintf(out, n, "conv_norm_out.%s", name + 6) > 0;
     if (!strncmp(name, "out.2.", 6)) return snprintf(out, n, "conv_out.%s", name + 6) > 0;
     if (!strncmp(name, "input_blocks.0.0.", 17)) return snprintf(out, n, "conv_in.%s", name + 17) > 0;
+    /* a ControlNet's hint block (convolutions at 0, 2, ..., 14), zero convolutions, middle output */
+    if (sscanf(name, "input_hint_block.%d.%n", &i, &off) == 1 && off && i % 2 == 0 && i <= 14) {
+        if (i == 0 || i == 14) return snprintf(out, n, "controlnet_cond_embedding.conv_%s.%s", i ? "out" : "in", name + off) > 0;
+        return snprintf(out, n, "controlnet_cond_embedding.blocks.%d.%s", i / 2 - 1, name + off) > 0;
+    }
+    if (sscanf(name, "zero_convs.%d.0.%n", &i, &off) == 1 && off) return snprintf(out, n, "controlnet_down_blocks.%d.%s", i, name + off) > 0;
+    if (!strncmp(name, "middle_block_out.0.", 19)) return snprintf(out, n, "controlnet_mid_block.%s", name + 19) > 0;
     int per = ld->nres + 1;
     if (sscanf(name, "input_blocks.%d.%d.%n", &i, &j, &off) == 2 && off && i >= 1) {
         const char *rest = name + off;

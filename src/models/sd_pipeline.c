@@ -13,8 +13,9 @@
 #include <sys/stat.h>
 
 struct g3d_sd {
-    g3d_ckpt *ck[3];   /* the model, the VAE's file, the text encoder's file (NULL: the model's) */
+    g3d_ckpt *ck[4];   /* the model, the VAE's file, the text encoder's file (NULL: the model's), the ControlNet's */
     g3d_sd_unet *unet;
+    g3d_sd_controlnet *cn;
     g3d_sd_vae *vae;
     g3d_clip_text *text;
     g3d_clip_tokenizer *tok;
@@ -27,7 +28,8 @@ void g3d_sd_free(g3d_sd *m)
     g3d_sd_vae_free(m->vae);
     g3d_clip_text_free(m->text);
     g3d_clip_tokenizer_free(m->tok);
-    for (int i = 0; i < 3; i++) g3d_ckpt_free(m->ck[i]);
+    g3d_sd_controlnet_free(m->cn);
+    for (int i = 0; i < 4; i++) g3d_ckpt_free(m->ck[i]);
     free(m);
 }
 
@@ -101,6 +103,7 @@ static g3d_status open_part(g3d_sd *m, int slot, const char *path, const char *s
     static const char *const text[] = {"model.safetensors", "model.fp16.safetensors", "pytorch_model.bin", "pytorch_model.fp16.bin"};
     if (!is_dir(path)) return g3d_ckpt_open(path, &m->ck[slot]);
     char *f = first_file(path, sub, strcmp(sub, "text_encoder") ? unet : text, 4);
+    if (!f && !strcmp(sub, ".")) return G3D_ERR(G3D_ERR_IO, "%s: neither a checkpoint file nor a folder with diffusion_pytorch_model weights", path);
     if (!f) return G3D_ERR(G3D_ERR_IO, "%s: neither a checkpoint file nor a diffusers folder with %s/ weights", path, sub);
     g3d_status rc = g3d_ckpt_open(f, &m->ck[slot]);
     free(f);
@@ -117,6 +120,23 @@ static int folder_prediction(const char *dir)
     cJSON_Delete(j);
     free(t);
     return r;
+}
+
+/* The ControlNet: its file, or a diffusers folder (diffusion_pytorch_model.* and config.json);
+ * it must fit the UNet and read the VAE's latent. */
+static g3d_status load_controlnet(g3d_sd *m, const char *path)
+{
+    G3D_TRY(open_part(m, 3, path, "."));
+    char *cfg = is_dir(path) ? read_text(path, ".", "config.json") : NULL;
+    g3d_status rc = g3d_sd_controlnet_load(m->ck[3], cfg, &m->cn);
+    free(cfg);
+    G3D_TRY(rc);
+    const g3d_sd_controlnet_config *cc = g3d_sd_controlnet_get_config(m->cn);
+    G3D_TRY(g3d_sd_controlnet_check(cc, path, g3d_sd_unet_get_config(m->unet)));
+    if (cc->net.in_ch != g3d_sd_vae_get_config(m->vae)->z_ch)
+        return G3D_ERR(G3D_ERR_MODEL, "%s: the ControlNet reads %d latent channels, the VAE gives %d", path, cc->net.in_ch,
+                       g3d_sd_vae_get_config(m->vae)->z_ch);
+    return check_finite(m->ck[3], cc->net.prefix);
 }
 
 static g3d_status sd_build(g3d_sd *m, const g3d_sd_paths *p)
@@ -162,7 +182,7 @@ static g3d_status sd_build(g3d_sd *m, const g3d_sd_paths *p)
     free(tokdir);
     G3D_TRY(rc);
     g3d_clip_tokenizer_set_openclip(m->tok, tc->family == G3D_CLIP_OPENCLIP);
-    return G3D_OK;
+    return p->controlnet ? load_controlnet(m, p->controlnet) : G3D_OK;
 }
 
 g3d_status g3d_sd_load(const g3d_sd_paths *p, g3d_sd **out)
@@ -181,6 +201,8 @@ g3d_status g3d_sd_load(const g3d_sd_paths *p, g3d_sd **out)
 }
 
 const g3d_sd_unet_config *g3d_sd_get_unet(const g3d_sd *m) { return g3d_sd_unet_get_config(m->unet); }
+
+const g3d_sd_controlnet *g3d_sd_get_controlnet(const g3d_sd *m) { return m->cn; }
 
 int g3d_sd_size_multiple(const g3d_sd *m)
 {
@@ -205,6 +227,7 @@ g3d_sd_params g3d_sd_defaults(void)
     p.width = p.height = 512;
     p.sampler = (g3d_sd_sampler){G3D_SD_DDIM, 50, 0.0f, 0, G3D_SD_PRED_EPS};
     p.cfg = 7.5f;
+    p.control_scale = 1.0f;
     return p;
 }
 
@@ -218,6 +241,7 @@ typedef struct loop {
     int nctx;
     float *extra;          /* inpainting models: mask [1, h, w] then masked latent [zc, h, w] */
     float *xin, *u;        /* scratch: the UNet's input, the unconditional output */
+    float *hint, *res;     /* with a ControlNet: its hint [hint_ch, 8h, 8w], scratch for its residuals */
     /* latent blending (a text-to-image model inpainting) */
     const float *known, *lmask, *noise0;
     g3d_rng rng;
@@ -248,7 +272,9 @@ static g3d_status run_unet(loop *L, const float *x, float t, const float *ctx, f
         memcpy(L->xin + L->zc * hw, L->extra, sizeof(float) * (L->zc + 1) * hw);
         in = L->xin;
     }
-    return g3d_sd_unet_forward(L->m->unet, in, L->h, L->w, t, ctx, L->nctx, out, NULL, NULL);
+    if (L->hint)
+        G3D_TRY(g3d_sd_controlnet_forward(L->m->cn, x, L->h, L->w, t, ctx, L->nctx, L->hint, L->p->control_scale, L->res, NULL, NULL));
+    return g3d_sd_unet_forward_controlled(L->m->unet, in, L->h, L->w, t, ctx, L->nctx, L->hint ? L->res : NULL, out, NULL, NULL);
 }
 
 static g3d_status model_fn(void *ctx, const float *x, float t, float *out)
@@ -319,6 +345,44 @@ static g3d_status check_params(const g3d_sd *m, const g3d_sd_params *p)
     return G3D_OK;
 }
 
+/* The ControlNet's hint (p->control as [hint_ch, 8h, 8w]) and room for its residuals. */
+static g3d_status control_hint(loop *L)
+{
+    const g3d_image *c = L->p->control;
+    if (!c) return L->m->cn ? G3D_ERR(G3D_ERR_ARG, "the ControlNet needs a control image") : G3D_OK;
+    if (!L->m->cn) return G3D_ERR(G3D_ERR_ARG, "a control image without a ControlNet");
+    int ch = g3d_sd_controlnet_get_config(L->m->cn)->hint_ch, W = L->w * G3D_SD_HINT_FACTOR, H = L->h * G3D_SD_HINT_FACTOR;
+    if (c->w != W || c->h != H || c->c != ch)
+        return G3D_ERR(G3D_ERR_ARG, "the control image is %dx%d with %d channels, the ControlNet needs %dx%d with %d", c->w, c->h,
+                       c->c, W, H, ch);
+    size_t hw = (size_t)W * H;
+    L->hint = malloc(sizeof(float) * hw * ch);
+    L->res = malloc(sizeof(float) * g3d_sd_controlnet_residual_floats(L->m->cn, L->h, L->w));
+    if (!L->hint || !L->res) return G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    for (size_t i = 0; i < hw; i++)
+        for (int k = 0; k < ch; k++) L->hint[k * hw + i] = c->data[i * ch + k];
+    return G3D_OK;
+}
+
+g3d_status g3d_sd_inpaint_hint(const g3d_image *image, const g3d_image *mask, const g3d_image *prefill, int w, int h,
+                               g3d_image *hint)
+{
+    memset(hint, 0, sizeof *hint);
+    if (!image || !mask || image->c != 3 || mask->c != 1 || mask->w != image->w || mask->h != image->h)
+        return G3D_ERR(G3D_ERR_ARG, "the inpainting hint needs an RGB picture and a mask of its size");
+    if (prefill && (prefill->w != image->w || prefill->h != image->h || prefill->c != 3))
+        return G3D_ERR(G3D_ERR_ARG, "the prefilled picture is %dx%d, the picture %dx%d", prefill->w, prefill->h, image->w, image->h);
+    G3D_TRY(g3d_image_create(hint, w, h, 3));
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            int sx = (int)((int64_t)x * image->w / w), sy = (int)((int64_t)y * image->h / h);
+            const float *src = g3d_image_px(image, sx, sy);
+            if (*g3d_image_px(mask, sx, sy) > 0.5f) src = prefill ? g3d_image_px(prefill, sx, sy) : NULL;
+            for (int k = 0; k < 3; k++) g3d_image_px(hint, x, y)[k] = src ? src[k] : -1.0f;
+        }
+    return G3D_OK;
+}
+
 /* Everything but the inputs that differ: text, noise, sampling, decoding into out. */
 static g3d_status generate(loop *L, float *x, g3d_image *out)
 {
@@ -330,6 +394,7 @@ static g3d_status generate(loop *L, float *x, g3d_image *out)
     L->u = malloc(sizeof(float) * n);
     L->xin = malloc(sizeof(float) * (size_t)g3d_sd_unet_get_config(m->unet)->in_ch * L->h * L->w);
     if (rc == G3D_OK && (!L->u || !L->xin)) rc = G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    if (rc == G3D_OK) rc = control_hint(L);
     g3d_sd_sampler s = p->sampler;
     s.pred = g3d_sd_unet_get_config(m->unet)->pred;
     if (rc == G3D_OK) rc = g3d_sd_sample(&s, x, n, model_fn, L, noise_fn, L, step_fn, L);
@@ -347,6 +412,8 @@ static g3d_status generate(loop *L, float *x, g3d_image *out)
     free(L->uncond);
     free(L->u);
     free(L->xin);
+    free(L->hint);
+    free(L->res);
     return rc;
 }
 
@@ -427,6 +494,7 @@ g3d_status g3d_sd_inpaint(const g3d_sd *m, g3d_sd_params *p, const g3d_image *im
     float *x = malloc(sizeof(float) * n), *mom = malloc(sizeof(float) * 2 * n), *lm = malloc(sizeof(float) * hw);
     float *pic = from_image(image, inpaint_model ? mask : NULL), *noise0 = malloc(sizeof(float) * n);
     float *extra = inpaint_model ? malloc(sizeof(float) * (n + hw)) : NULL;
+    g3d_image hint = {0};
     g3d_status rc = x && mom && lm && pic && noise0 && (extra || !inpaint_model) ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
     if (rc == G3D_OK) rc = g3d_sd_vae_encode(m->vae, pic, p->height, p->width, mom, NULL, NULL);
     if (rc == G3D_OK) {
@@ -457,7 +525,12 @@ g3d_status g3d_sd_inpaint(const g3d_sd *m, g3d_sd_params *p, const g3d_image *im
             L.lmask = lm;
             L.noise0 = noise0;
         }
-        rc = generate(&L, x, out);
+        if (m->cn && !p->control) {
+            rc = g3d_sd_inpaint_hint(image, mask, NULL, L.w * G3D_SD_HINT_FACTOR, L.h * G3D_SD_HINT_FACTOR, &hint);
+            p->control = &hint;
+        }
+        if (rc == G3D_OK) rc = generate(&L, x, out);
+        if (p->control == &hint) p->control = NULL;
     }
     if (rc == G3D_OK) paste_back(image, mask, out, 8.0f);
     free(x);
@@ -466,6 +539,7 @@ g3d_status g3d_sd_inpaint(const g3d_sd *m, g3d_sd_params *p, const g3d_image *im
     free(pic);
     free(noise0);
     free(extra);
+    g3d_image_free(&hint);
     if (rc != G3D_OK) g3d_image_free(out);
     return rc;
 }
@@ -503,6 +577,7 @@ static g3d_status plugin_inpaint(void *ctx, g3d_image *image, const g3d_image *m
         if (!p.prompt) p.prompt = prompt ? prompt : "";
         p.seed = seed;
         p.noise = NULL;
+        p.control = NULL;   /* a ControlNet gets the inpainting hint of the padded picture */
         rc = g3d_sd_inpaint(pl->m, &p, &pi, &pm, &out);
     }
     if (rc == G3D_OK)

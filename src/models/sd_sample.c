@@ -7,7 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-static const char *const NAMES[G3D_SD_SAMPLER_COUNT] = {"ddim", "euler", "euler_a", "dpmpp_2m", "pndm"};
+static const char *const NAMES[G3D_SD_SAMPLER_COUNT] = {"ddim", "euler", "euler_a", "dpmpp_2m", "pndm", "plms"};
 
 int g3d_sd_sampler_parse(const char *name)
 {
@@ -105,6 +105,14 @@ static g3d_status after_step(const run *r, int i, int total, float *x, float a, 
     return G3D_OK;
 }
 
+/* after_step for the samplers on training timesteps: the next timestep's sqrt(alphas_cumprod)
+ * and sqrt(1 - alphas_cumprod), 1 and 0 after the last step. */
+static g3d_status after_timestep(const run *r, const float *ac, const int *ts, int i, int total, float *x)
+{
+    float a = i + 1 < total ? sqrtf(ac[ts[i + 1]]) : 1.0f, b = i + 1 < total ? sqrtf(1.0f - ac[ts[i + 1]]) : 0.0f;
+    return after_step(r, i, total, x, a, b);
+}
+
 static g3d_status need_noise(const run *r)
 {
     if (!r->noise) return G3D_ERR(G3D_ERR_ARG, "the %s sampler needs a noise source", g3d_sd_sampler_name(r->s->kind));
@@ -139,10 +147,52 @@ static g3d_status ddim(const run *r, float *x)
             }
             x[j] = (float)(sap * x0 + dir * e + (eta != 0 ? sigma * r->z[j] : 0));
         }
-        float na = i + 1 < k ? sqrtf(ac[ts[i + 1]]) : 1.0f, nb = i + 1 < k ? sqrtf(1.0f - ac[ts[i + 1]]) : 0.0f;
-        G3D_TRY(after_step(r, i, k, x, na, nb));
+        G3D_TRY(after_timestep(r, ac, ts, i, k, x));
     }
     return G3D_OK;
+}
+
+/* ldm's PLMSSampler: DDIM's timesteps and deterministic update, fed with a pseudo linear
+ * multistep estimate of the noise: the first step a pseudo improved Euler step (the model
+ * again at the next timestep on DDIM's step, the two estimates averaged: N + 1 model calls),
+ * then Adams-Bashforth of order 2, 3 and 4 over the model's earlier outputs. */
+static g3d_status plms(const run *r, float *x)
+{
+    if (r->s->pred != G3D_SD_PRED_EPS) return G3D_ERR(G3D_ERR_ARG, "ldm's PLMS sampler takes noise-predicting (epsilon) models only");
+    if (r->s->eta != 0) return G3D_ERR(G3D_ERR_ARG, "ldm's PLMS sampler has no eta (it must be 0)");
+    float ac[G3D_SD_TRAIN_STEPS];
+    int ts[G3D_SD_TRAIN_STEPS];
+    g3d_sd_alphas_cumprod(ac);
+    int k = g3d_sd_ddim_timesteps(r->s->steps, ts), nold = 0;
+    /* the last three outputs (a ring), the current one, the pseudo Euler step's latent */
+    float *old = malloc(sizeof(float) * 3 * r->n), *e = malloc(sizeof(float) * r->n), *xp = malloc(sizeof(float) * r->n);
+    g3d_status rc = old && e && xp ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory in the sampler");
+    for (int i = 0; rc == G3D_OK && i < k; i++) {
+        int t = ts[i], tn = ts[i + 1 < k ? i + 1 : k - 1];
+        double at = ac[t], ap = i + 1 < k ? ac[ts[i + 1]] : ac[0];
+        double sa = sqrt(at), sb = sqrt(1 - at), sap = sqrt(ap), dir = sqrt(1 - ap);
+        if ((rc = r->model(r->mctx, x, (float)t, e)) != G3D_OK) break;
+        const float *o1 = old + (size_t)((nold + 2) % 3) * r->n, *o2 = old + (size_t)((nold + 1) % 3) * r->n, *o3 = old + (size_t)(nold % 3) * r->n;
+        if (nold == 0) {
+            for (size_t j = 0; j < r->n; j++) xp[j] = (float)(sap * ((x[j] - sb * e[j]) / sa) + dir * e[j]);
+            if ((rc = r->model(r->mctx, xp, (float)tn, r->out)) != G3D_OK) break;
+        }
+        for (size_t j = 0; j < r->n; j++) {
+            double m;
+            if (nold == 0) m = ((double)e[j] + r->out[j]) / 2.0;
+            else if (nold == 1) m = (3.0 * e[j] - o1[j]) / 2.0;
+            else if (nold == 2) m = (23.0 * e[j] - 16.0 * o1[j] + 5.0 * o2[j]) / 12.0;
+            else m = (55.0 * e[j] - 59.0 * o1[j] + 37.0 * o2[j] - 9.0 * o3[j]) / 24.0;
+            x[j] = (float)(sap * ((x[j] - sb * m) / sa) + dir * m);
+        }
+        memcpy(old + (size_t)(nold % 3) * r->n, e, sizeof(float) * r->n);
+        nold++;
+        rc = after_timestep(r, ac, ts, i, k, x);
+    }
+    free(old);
+    free(e);
+    free(xp);
+    return rc;
 }
 
 /* k-diffusion's CompVis denoisers: the denoised latent d at noise level sigma. */
@@ -274,8 +324,7 @@ static g3d_status pndm(const run *r, float *x)
             if (v) m = sqrt(at) * m + sqrt(bt) * s;
             x[j] = (float)(sc * s - (ap - at) * m / den);
         }
-        float na = k + 1 < calls ? sqrtf(ac[ts[k + 1]]) : 1.0f, nb = k + 1 < calls ? sqrtf(1.0f - ac[ts[k + 1]]) : 0.0f;
-        rc = after_step(r, k, calls, x, na, nb);
+        rc = after_timestep(r, ac, ts, k, calls, x);
     }
     free(ts);
     free(ets);
@@ -293,7 +342,8 @@ g3d_status g3d_sd_sample(const g3d_sd_sampler *s, float *x, size_t n, g3d_sd_mod
     run r = {s, n, model, model_ctx, noise, noise_ctx, step, step_ctx, malloc(sizeof(float) * n), malloc(sizeof(float) * n),
              malloc(sizeof(float) * n)};
     g3d_status rc = r.out && r.tmp && r.z ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory in the sampler");
-    if (rc == G3D_OK) rc = s->kind == G3D_SD_DDIM ? ddim(&r, x) : s->kind == G3D_SD_PNDM ? pndm(&r, x) : kdiff(&r, x);
+    if (rc == G3D_OK)
+        rc = s->kind == G3D_SD_DDIM ? ddim(&r, x) : s->kind == G3D_SD_PNDM ? pndm(&r, x) : s->kind == G3D_SD_PLMS ? plms(&r, x) : kdiff(&r, x);
     free(r.out);
     free(r.tmp);
     free(r.z);

@@ -16,6 +16,9 @@
 #define GN_EPS_RES 1e-5f  /* GroupNorm32 of the ResBlocks and the output (PyTorch's default) */
 #define GN_EPS_ST 1e-6f   /* the spatial transformer's Normalize() */
 #define LN_EPS 1e-5f
+/* cldm's input_hint_block: eight 3x3 convolutions (SiLU between them), these of stride 2 */
+#define HINT_CONVS 8
+static const int HINT_STRIDE[HINT_CONVS] = {1, 1, 2, 1, 2, 1, 2, 1};
 
 typedef struct sd_tblock {
     float *ln[3][2];
@@ -46,6 +49,14 @@ struct g3d_sd_unet {
     g3d_nn_conv conv_in, conv_out;
     float *gn_out_g, *gn_out_b;
     sd_block *in, *out, mid[3];
+    /* a ControlNet: the encoder half (no output blocks) with its hint block and zero convolutions */
+    int control;
+    g3d_nn_conv hint[HINT_CONVS], *zero, mid_out;
+};
+
+struct g3d_sd_controlnet {
+    g3d_sd_unet net;   /* first: the encoder's code runs on it */
+    g3d_sd_controlnet_config cfg;
 };
 
 /* ---- configuration ------------------------------------------------------------------- */
@@ -98,25 +109,13 @@ static g3d_status apply_json(const g3d_ckpt *ck, const char *text, g3d_sd_unet_c
     return rc;
 }
 
-g3d_status g3d_sd_unet_probe(const g3d_ckpt *ck, const char *yaml, g3d_sd_unet_config *c)
+/* The encoder half both the UNet and a ControlNet have, in the order the constructor builds
+ * it, with ld's prefix and layout already found: in-channels, model channels, the levels, the
+ * middle block's transformer (context width, depth, projections), the family's head split. */
+static g3d_status probe_encoder(const sd_ld *ldp, g3d_sd_unet_config *c)
 {
-    memset(c, 0, sizeof *c);
-    sd_ld ld = {ck, NULL, SD_ORIGINAL, 0, 0};
-    for (size_t i = 0; i < sizeof UNET_PREFIXES / sizeof *UNET_PREFIXES && !ld.prefix; i++) {
-        sd_ld t = {ck, UNET_PREFIXES[i], SD_ORIGINAL, 0, 0};
-        if (sd_find(&t, "input_blocks.0.0.weight") && sd_find(&t, "time_embed.0.weight")) ld.prefix = t.prefix;
-    }
-    if (!ld.prefix && g3d_ckpt_find(ck, "conv_in.weight") && g3d_ckpt_find(ck, "time_embedding.linear_1.weight")) {
-        char k[64];
-        ld.prefix = "";
-        ld.layout = SD_DIFFUSERS_UNET;
-        c->diffusers = 1;
-        do snprintf(k, sizeof k, "down_blocks.0.resnets.%d.conv1.weight", ld.nres);
-        while (g3d_ckpt_find(ck, k) && ++ld.nres < 64);
-    }
-    if (!ld.prefix)
-        return G3D_ERR(G3D_ERR_MODEL, "%s: not a Stable Diffusion UNet (missing tensor model.diffusion_model.input_blocks.0.0.weight)",
-                       g3d_ckpt_path(ck));
+    const sd_ld ld = *ldp;
+    const g3d_ckpt *ck = ld.ck;
     c->prefix = ld.prefix;
     const g3d_tensor_info *t = sd_find(&ld, "input_blocks.0.0.weight");
     if (t->ndim != 4 || t->shape[2] != 3 || t->shape[3] != 3)
@@ -149,13 +148,10 @@ g3d_status g3d_sd_unet_probe(const g3d_ckpt *ck, const char *yaml, g3d_sd_unet_c
                            g3d_ckpt_path(ck), l, ld.prefix);
     const g3d_tensor_info *k = sd_find(&ld, "middle_block.1.transformer_blocks.0.attn2.to_k.weight");
     const g3d_tensor_info *pin = sd_find(&ld, "middle_block.1.proj_in.weight");
-    const g3d_tensor_info *o = sd_find(&ld, "out.2.weight");
     if (!k || k->ndim != 2 || !pin)
         return G3D_ERR(G3D_ERR_MODEL, "%s: missing tensor %smiddle_block.1.%s", g3d_ckpt_path(ck), ld.prefix,
                        !pin ? "proj_in.weight" : "transformer_blocks.0.attn2.to_k.weight");
-    if (!o || o->ndim != 4) return G3D_ERR(G3D_ERR_MODEL, "%s: missing tensor %sout.2.weight", g3d_ckpt_path(ck), ld.prefix);
     c->context_dim = (int)k->shape[1];
-    c->out_ch = (int)o->shape[0];
     c->linear_proj = pin->ndim == 2;
     while (sd_find(&ld, "middle_block.1.transformer_blocks.%d.attn1.to_q.weight", c->depth)) c->depth++;
     /* the published conventions: SD 1.x 8 heads and 1x1-conv projections, SD 2.x heads of 64
@@ -164,6 +160,12 @@ g3d_status g3d_sd_unet_probe(const g3d_ckpt *ck, const char *yaml, g3d_sd_unet_c
     if (c->family == 2) c->head_dim = 64;
     else c->heads = 8;
     c->pred = G3D_SD_PRED_EPS;
+    return G3D_OK;
+}
+
+/* The original yaml configuration's fields, or diffusers' config.json (text starting with '{'). */
+static g3d_status apply_config(const g3d_ckpt *ck, const char *yaml, g3d_sd_unet_config *c)
+{
     const char *y = yaml;
     while (y && isspace((unsigned char)*y)) y++;
     if (y && *y == '{') return apply_json(ck, y, c);
@@ -181,6 +183,69 @@ g3d_status g3d_sd_unet_probe(const g3d_ckpt *ck, const char *yaml, g3d_sd_unet_c
                            c->context_dim);
     }
     return G3D_OK;
+}
+
+/* Counts diffusers' res blocks per level (down_blocks.0.resnets.N) into ld->nres. */
+static void diffusers_nres(sd_ld *ld)
+{
+    char k[64];
+    ld->nres = 0;
+    do snprintf(k, sizeof k, "down_blocks.0.resnets.%d.conv1.weight", ld->nres);
+    while (g3d_ckpt_find(ld->ck, k) && ++ld->nres < 64);
+}
+
+/* Where a network's tensors are: under the first of the prefixes that holds both original
+ * names mark[0] and mark[1], else in diffusers' layout when the file holds its names mark[2]
+ * and mark[3]. ld->prefix stays NULL when neither. */
+static void find_layout(const g3d_ckpt *ck, const char *const *prefixes, size_t np, const char *const mark[4], sd_ld *ld,
+                        g3d_sd_unet_config *c)
+{
+    *ld = (sd_ld){ck, NULL, SD_ORIGINAL, 0, 0};
+    for (size_t i = 0; i < np && !ld->prefix; i++) {
+        sd_ld t = {ck, prefixes[i], SD_ORIGINAL, 0, 0};
+        if (sd_find(&t, mark[0]) && sd_find(&t, mark[1])) ld->prefix = t.prefix;
+    }
+    if (!ld->prefix && g3d_ckpt_find(ck, mark[2]) && g3d_ckpt_find(ck, mark[3])) {
+        ld->prefix = "";
+        ld->layout = SD_DIFFUSERS_UNET;
+        c->diffusers = 1;
+        diffusers_nres(ld);
+    }
+}
+
+g3d_status g3d_sd_unet_probe(const g3d_ckpt *ck, const char *yaml, g3d_sd_unet_config *c)
+{
+    static const char *const mark[4] = {"input_blocks.0.0.weight", "time_embed.0.weight", "conv_in.weight", "time_embedding.linear_1.weight"};
+    memset(c, 0, sizeof *c);
+    sd_ld ld;
+    find_layout(ck, UNET_PREFIXES, sizeof UNET_PREFIXES / sizeof *UNET_PREFIXES, mark, &ld, c);
+    if (!ld.prefix)
+        return G3D_ERR(G3D_ERR_MODEL, "%s: not a Stable Diffusion UNet (missing tensor model.diffusion_model.input_blocks.0.0.weight)",
+                       g3d_ckpt_path(ck));
+    G3D_TRY(probe_encoder(&ld, c));
+    const g3d_tensor_info *o = sd_find(&ld, "out.2.weight");
+    if (!o || o->ndim != 4) return G3D_ERR(G3D_ERR_MODEL, "%s: missing tensor %sout.2.weight", g3d_ckpt_path(ck), ld.prefix);
+    c->out_ch = (int)o->shape[0];
+    return apply_config(ck, yaml, c);
+}
+
+static const char *const CONTROL_PREFIXES[] = {"control_model.", ""};
+
+g3d_status g3d_sd_controlnet_probe(const g3d_ckpt *ck, const char *config, g3d_sd_controlnet_config *cc)
+{
+    static const char *const mark[4] = {"input_hint_block.0.weight", "input_blocks.0.0.weight",
+                                        "controlnet_cond_embedding.conv_in.weight", "conv_in.weight"};
+    memset(cc, 0, sizeof *cc);
+    g3d_sd_unet_config *c = &cc->net;
+    sd_ld ld;
+    find_layout(ck, CONTROL_PREFIXES, sizeof CONTROL_PREFIXES / sizeof *CONTROL_PREFIXES, mark, &ld, c);
+    if (!ld.prefix)
+        return G3D_ERR(G3D_ERR_MODEL, "%s: not a ControlNet (missing tensor control_model.input_hint_block.0.weight)", g3d_ckpt_path(ck));
+    G3D_TRY(probe_encoder(&ld, c));
+    const g3d_tensor_info *h = sd_find(&ld, "input_hint_block.0.weight");
+    if (h->ndim != 4) return G3D_ERR(G3D_ERR_MODEL, "%s: tensor %sinput_hint_block.0.weight is not a convolution", g3d_ckpt_path(ck), ld.prefix);
+    cc->hint_ch = (int)h->shape[1];
+    return apply_config(ck, config, c);
 }
 
 char *g3d_sd_yaml_beside(const char *model_path)
@@ -300,9 +365,8 @@ static void block_free(sd_block *b)
     sd_conv_free(&b->resample);
 }
 
-void g3d_sd_unet_free(g3d_sd_unet *m)
+static void unet_release(g3d_sd_unet *m)
 {
-    if (!m) return;
     for (int i = 0; m->in && i < m->nin; i++) block_free(&m->in[i]);
     for (int i = 0; m->out && i < m->nout; i++) block_free(&m->out[i]);
     for (int i = 0; i < 3; i++) block_free(&m->mid[i]);
@@ -314,6 +378,23 @@ void g3d_sd_unet_free(g3d_sd_unet *m)
     sd_conv_free(&m->conv_out);
     free(m->gn_out_g);
     free(m->gn_out_b);
+    for (int i = 0; i < HINT_CONVS; i++) sd_conv_free(&m->hint[i]);
+    for (int i = 0; m->zero && i < m->nin; i++) sd_conv_free(&m->zero[i]);
+    free(m->zero);
+    sd_conv_free(&m->mid_out);
+}
+
+void g3d_sd_unet_free(g3d_sd_unet *m)
+{
+    if (!m) return;
+    unet_release(m);
+    free(m);
+}
+
+void g3d_sd_controlnet_free(g3d_sd_controlnet *m)
+{
+    if (!m) return;
+    unet_release(&m->net);
     free(m);
 }
 
@@ -377,6 +458,23 @@ static g3d_status unet_build(g3d_sd_unet *m, const g3d_ckpt *ck)
         if (k == 1) m->mid[k].has_st = 1;
         else m->mid[k].has_res = 1;
         G3D_TRY(k == 1 ? st_load(&ld, c, &m->mid[k].st, ch, n) : sd_res_load(&ld, &m->mid[k].res, ch, ch, m->temb_dim, GN_EPS_RES, n));
+    }
+    if (m->control) {
+        /* the hint block's widths come from its tensors; its last convolution gives the model channels */
+        int hc = ((const g3d_sd_controlnet *)m)->cfg.hint_ch;
+        for (int k = 0; k < HINT_CONVS; k++) {
+            const g3d_tensor_info *t = sd_find(&ld, "input_hint_block.%d.weight", 2 * k);
+            int co = k == HINT_CONVS - 1 ? C : t && t->ndim == 4 ? (int)t->shape[0] : 1;
+            snprintf(n, sizeof n, "input_hint_block.%d", 2 * k);
+            G3D_TRY(sd_conv_load(&ld, &m->hint[k], hc, co, 3, HINT_STRIDE[k], n));
+            hc = co;
+        }
+        if (!(m->zero = calloc((size_t)m->nin, sizeof *m->zero))) return G3D_ERR(G3D_ERR_NOMEM, "out of memory loading the ControlNet");
+        for (int b = 0; b < m->nin; b++) {
+            snprintf(n, sizeof n, "zero_convs.%d.0", b);
+            G3D_TRY(sd_conv_load(&ld, &m->zero[b], chans[b], chans[b], 1, 1, n));
+        }
+        return sd_conv_load(&ld, &m->mid_out, ch, ch, 1, 1, "middle_block_out.0");
     }
     i = 0;
     for (int l = c->levels - 1; l >= 0; l--)
@@ -524,7 +622,18 @@ static void emit(const fwd *f, const char *fmt, int i, const float *x, int c, in
     f->trace(f->tctx, n, x, c, h, w);
 }
 
-static g3d_status unet_run(const g3d_sd_unet *m, fwd *f, const float *x, int h, int w, float t, float *out)
+/* The shapes of the skip connections (and the middle block's output, last): where each of a
+ * ControlNet's residuals sits in their packed buffer. */
+typedef struct skips {
+    const float *x[65];
+    int c[65], h[65], w[65], n;
+} skips;
+
+/* Time embedding (into f->emb), input blocks and middle block: the skips and, in *cur, the
+ * middle block's output. guided (a ControlNet's hint features, [model_ch, h, w]) is added
+ * after the first convolution, as cldm's ControlNet does. */
+static g3d_status encode(const g3d_sd_unet *m, fwd *f, const float *x, int h, int w, float t, const float *guided, skips *s,
+                         float **cur)
 {
     const g3d_sd_unet_config *c = &m->cfg;
     int E = m->temb_dim, C = c->model_ch;
@@ -538,29 +647,49 @@ static g3d_status unet_run(const g3d_sd_unet *m, fwd *f, const float *x, int h, 
     /* every ResBlock starts its embedding branch with SiLU */
     g3d_nn_activate(G3D_ACT_SILU, emb, (size_t)E);
     f->emb = emb;
-    const float *skips[64];
-    int sc[64], ns = 0;
-    float *cur = take(f, (size_t)C * h * w);
-    if (!cur) return NOMEM;
-    G3D_TRY(g3d_nn_conv_forward(&m->conv_in, x, h, w, cur, NULL));
-    emit(f, "in%d", 0, cur, C, h, w);
-    skips[ns] = cur, sc[ns++] = C;
+    float *h0 = take(f, (size_t)C * h * w);
+    if (!h0) return NOMEM;
+    g3d_nn_epi add = {.res = guided};
+    G3D_TRY(g3d_nn_conv_forward(&m->conv_in, x, h, w, h0, guided ? &add : NULL));
+    *cur = h0;
     int ch = C;
-    for (int i = 1; i < m->nin; i++) {
-        G3D_TRY(block_forward(&m->in[i], f, cur, &h, &w, &cur));
-        ch = m->in[i].cout;
-        emit(f, "in%d", i, cur, ch, h, w);
-        skips[ns] = cur, sc[ns++] = ch;
+    s->n = 0;
+    for (int i = 0; i < m->nin; i++) {
+        if (i) G3D_TRY(block_forward(&m->in[i], f, *cur, &h, &w, cur));
+        ch = i ? m->in[i].cout : C;
+        emit(f, "in%d", i, *cur, ch, h, w);
+        s->x[s->n] = *cur, s->c[s->n] = ch, s->h[s->n] = h, s->w[s->n++] = w;
     }
-    for (int i = 0; i < 3; i++) G3D_TRY(block_forward(&m->mid[i], f, cur, &h, &w, &cur));
-    emit(f, "mid", 0, cur, ch, h, w);
+    for (int i = 0; i < 3; i++) G3D_TRY(block_forward(&m->mid[i], f, *cur, &h, &w, cur));
+    emit(f, "mid", 0, *cur, ch, h, w);
+    s->x[s->n] = *cur, s->c[s->n] = ch, s->h[s->n] = h, s->w[s->n] = w;
+    return G3D_OK;
+}
+
+static g3d_status unet_run(const g3d_sd_unet *m, fwd *f, const float *x, int h, int w, float t, const float *res, float *out)
+{
+    skips s;
+    float *cur;
+    G3D_TRY(encode(m, f, x, h, w, t, NULL, &s, &cur));
+    /* a ControlNet's residuals: one per skip, in order, then the middle block's */
+    const float *rs[65];
+    for (int i = 0; res && i <= s.n; i++) {
+        rs[i] = res;
+        res += (size_t)s.c[i] * s.h[i] * s.w[i];
+    }
+    int ch = s.c[s.n], ns = s.n;
+    h = s.h[ns], w = s.w[ns];
+    if (res)
+        for (size_t i = 0; i < (size_t)ch * h * w; i++) cur[i] += rs[ns][i];
     for (int i = 0; i < m->nout; i++) {
-        int ich = sc[--ns];
+        int ich = s.c[--ns];
         size_t hw = (size_t)h * w;
         float *cat = take(f, (size_t)(ch + ich) * hw);
         if (!cat) return NOMEM;
         memcpy(cat, cur, sizeof(float) * ch * hw);
-        memcpy(cat + ch * hw, skips[ns], sizeof(float) * ich * hw);
+        memcpy(cat + ch * hw, s.x[ns], sizeof(float) * ich * hw);
+        if (res)
+            for (size_t k = 0; k < (size_t)ich * hw; k++) cat[ch * hw + k] += rs[ns][k];
         G3D_TRY(block_forward(&m->out[i], f, cat, &h, &w, &cur));
         ch = m->out[i].cout;
         emit(f, "out%d", i, cur, ch, h, w);
@@ -571,16 +700,136 @@ static g3d_status unet_run(const g3d_sd_unet *m, fwd *f, const float *x, int h, 
     return g3d_nn_conv_forward(&m->conv_out, g, h, w, out, NULL);
 }
 
-g3d_status g3d_sd_unet_forward(const g3d_sd_unet *m, const float *x, int h, int w, float t, const float *ctx, int nctx,
-                               float *out, g3d_sd_trace_fn trace, void *trace_ctx)
+/* The checks every forward shares; the arena in f. */
+static g3d_status fwd_begin(const g3d_sd_unet *m, fwd *f, int h, int w, const float *ctx, int nctx, g3d_sd_trace_fn trace,
+                            void *trace_ctx)
 {
     int f2 = 1 << (m->cfg.levels - 1);
     if (h < 1 || w < 1 || h % f2 || w % f2)
         return G3D_ERR(G3D_ERR_ARG, "latent %dx%d: width and height must be multiples of %d", w, h, f2);
     if (nctx < 1 || !ctx) return G3D_ERR(G3D_ERR_ARG, "the UNet needs a text context");
-    fwd f = {.ar = g3d_nn_arena_new(0), .ctx = ctx, .nctx = nctx, .trace = trace, .tctx = trace_ctx};
-    if (!f.ar) return NOMEM;
-    g3d_status rc = unet_run(m, &f, x, h, w, t, out);
+    *f = (fwd){.ar = g3d_nn_arena_new(0), .ctx = ctx, .nctx = nctx, .trace = trace, .tctx = trace_ctx};
+    return f->ar ? G3D_OK : NOMEM;
+}
+
+g3d_status g3d_sd_unet_forward_controlled(const g3d_sd_unet *m, const float *x, int h, int w, float t, const float *ctx,
+                                          int nctx, const float *residuals, float *out, g3d_sd_trace_fn trace, void *trace_ctx)
+{
+    fwd f;
+    G3D_TRY(fwd_begin(m, &f, h, w, ctx, nctx, trace, trace_ctx));
+    g3d_status rc = unet_run(m, &f, x, h, w, t, residuals, out);
+    g3d_nn_arena_free(f.ar);
+    return rc;
+}
+
+g3d_status g3d_sd_unet_forward(const g3d_sd_unet *m, const float *x, int h, int w, float t, const float *ctx, int nctx,
+                               float *out, g3d_sd_trace_fn trace, void *trace_ctx)
+{
+    return g3d_sd_unet_forward_controlled(m, x, h, w, t, ctx, nctx, NULL, out, trace, trace_ctx);
+}
+
+/* ---- ControlNet ------------------------------------------------------------------------ */
+
+g3d_status g3d_sd_controlnet_load(const g3d_ckpt *ck, const char *config, g3d_sd_controlnet **out)
+{
+    *out = NULL;
+    g3d_sd_controlnet *m = calloc(1, sizeof *m);
+    if (!m) return G3D_ERR(G3D_ERR_NOMEM, "out of memory loading the ControlNet");
+    m->net.control = 1;
+    g3d_status rc = g3d_sd_controlnet_probe(ck, config, &m->cfg);
+    m->net.cfg = m->cfg.net;
+    if (rc == G3D_OK) rc = unet_build(&m->net, ck);
+    if (rc != G3D_OK) {
+        g3d_sd_controlnet_free(m);
+        return rc;
+    }
+    *out = m;
+    return G3D_OK;
+}
+
+const g3d_sd_controlnet_config *g3d_sd_controlnet_get_config(const g3d_sd_controlnet *m) { return &m->cfg; }
+
+/* "SD 1.x, context 768, model channels 320, multipliers 1/2/4/4, res blocks 2/2/2/2" */
+static void net_figures(const g3d_sd_unet_config *c, char *buf, size_t n)
+{
+    int k = snprintf(buf, n, "SD %d.x, context %d, model channels %d, multipliers ", c->family, c->context_dim, c->model_ch);
+    for (int l = 0; l < c->levels && k > 0 && (size_t)k < n; l++) k += snprintf(buf + k, n - k, "%s%d", l ? "/" : "", c->mult[l]);
+    if (k > 0 && (size_t)k < n) k += snprintf(buf + k, n - k, ", res blocks ");
+    for (int l = 0; l < c->levels && k > 0 && (size_t)k < n; l++) k += snprintf(buf + k, n - k, "%s%d", l ? "/" : "", c->nres[l]);
+}
+
+const char *g3d_sd_controlnet_describe(const g3d_sd_controlnet_config *c, char *buf, size_t n)
+{
+    char unet[512];
+    g3d_sd_unet_describe(&c->net, unet, sizeof unet);
+    /* the UNet's description without its output and prediction, which a ControlNet has not */
+    char *cut = strstr(unet, ", epsilon prediction)");
+    if (cut) strcpy(cut, ")");
+    snprintf(buf, n, "ControlNet for SD %d.x (hint %d channels at %dx the latent; encoder: %s)", c->net.family, c->hint_ch,
+             G3D_SD_HINT_FACTOR, unet);
+    return buf;
+}
+
+g3d_status g3d_sd_controlnet_check(const g3d_sd_controlnet_config *cn, const char *path, const g3d_sd_unet_config *u)
+{
+    const g3d_sd_unet_config *c = &cn->net;
+    int ok = c->model_ch == u->model_ch && c->levels == u->levels && c->context_dim == u->context_dim;
+    for (int l = 0; ok && l < c->levels; l++) ok = c->mult[l] == u->mult[l] && c->nres[l] == u->nres[l];
+    if (ok) return G3D_OK;
+    char a[256], b[256];
+    net_figures(c, a, sizeof a);
+    net_figures(u, b, sizeof b);
+    return G3D_ERR(G3D_ERR_MODEL, "%s: the ControlNet (%s) does not fit the UNet (%s)", path, a, b);
+}
+
+size_t g3d_sd_controlnet_residual_floats(const g3d_sd_controlnet *m, int h, int w)
+{
+    const g3d_sd_unet *u = &m->net;
+    size_t n = 0;
+    int l = 0;
+    for (int i = 0; i < u->nin; i++) {
+        l += i && u->in[i].has_down;   /* a downsampling block's output is at the next level */
+        n += (size_t)(i ? u->in[i].cout : u->cfg.model_ch) * (h >> l) * (w >> l);
+    }
+    return n + (size_t)u->mid[2].cout * (h >> l) * (w >> l);
+}
+
+g3d_status g3d_sd_controlnet_forward(const g3d_sd_controlnet *cn, const float *x, int h, int w, float t, const float *ctx,
+                                     int nctx, const float *hint, float scale, float *residuals, g3d_sd_trace_fn trace,
+                                     void *trace_ctx)
+{
+    const g3d_sd_unet *m = &cn->net;
+    fwd f;
+    G3D_TRY(fwd_begin(m, &f, h, w, ctx, nctx, trace, trace_ctx));
+    g3d_status rc = G3D_OK;
+    /* the hint block: [hint_ch, 8h, 8w] down to [model_ch, h, w] */
+    int hh = h * G3D_SD_HINT_FACTOR, hw = w * G3D_SD_HINT_FACTOR;
+    const float *cur = hint;
+    for (int k = 0; k < HINT_CONVS && rc == G3D_OK; k++) {
+        int ho, wo;
+        rc = g3d_nn_conv_out_size(&m->hint[k], hh, hw, &ho, &wo);
+        float *o = rc == G3D_OK ? take(&f, (size_t)m->hint[k].cout * ho * wo) : NULL;
+        if (rc == G3D_OK && !o) rc = NOMEM;
+        g3d_nn_epi silu = {.act = G3D_ACT_SILU};
+        if (rc == G3D_OK) rc = g3d_nn_conv_forward(&m->hint[k], cur, hh, hw, o, k < HINT_CONVS - 1 ? &silu : NULL);
+        cur = o, hh = ho, hw = wo;
+    }
+    if (rc == G3D_OK && (hh != h || hw != w))
+        rc = G3D_ERR(G3D_ERR_ARG, "the ControlNet's hint block gives %dx%d for a %dx%d latent", hw, hh, w, h);
+    if (rc == G3D_OK) emit(&f, "guided_hint", 0, cur, m->cfg.model_ch, h, w);
+    skips s = {.n = 0};
+    float *mid;
+    if (rc == G3D_OK) rc = encode(m, &f, x, h, w, t, cur, &s, &mid);
+    float *r = residuals;
+    for (int i = 0; i <= s.n && rc == G3D_OK; i++) {
+        const g3d_nn_conv *z = i < s.n ? &m->zero[i] : &m->mid_out;
+        size_t n = (size_t)s.c[i] * s.h[i] * s.w[i];
+        rc = g3d_nn_conv_forward(z, s.x[i], s.h[i], s.w[i], r, NULL);
+        if (rc != G3D_OK) break;
+        emit(&f, "control%d", i, r, s.c[i], s.h[i], s.w[i]);
+        for (size_t k = 0; k < n; k++) r[k] *= scale;
+        r += n;
+    }
     g3d_nn_arena_free(f.ar);
     return rc;
 }

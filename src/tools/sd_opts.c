@@ -3,6 +3,7 @@
 
 #include "cli.h"
 #include "gen3d/imageio.h"
+#include "gen3d/lama.h"
 #include "gen3d/npy.h"
 #include "gen3d/sd.h"
 
@@ -18,16 +19,16 @@ static const char *DESC_COMMON =
     "the head split and v-prediction when they differ from the family's defaults; --vae and\n"
     "--text-encoder take those parts from other files. The prompt is tokenized with --tokenizer or\n"
     "OpenAI's CLIP vocabulary (docs/text.md); a prompt longer than the 77-token context is refused.\n"
-    "Samplers: ddim (eta: --eta), pndm (diffusers' default for SD 1.5), euler, euler_a, dpmpp_2m;\n"
+    "Samplers: ddim (eta: --eta), pndm (diffusers' default for SD 1.5), plms (ldm's), euler, euler_a, dpmpp_2m;\n"
     "--karras uses Karras et al.'s sigmas for the last three. The same seed gives the same picture, byte for byte; --noise FILE.npy gives the\n"
     "initial latent noise [1, 4, H/8, W/8] instead (to compare with another implementation).";
 
 typedef struct sd_cli {
     g3d_cli_common common;
     g3d_sd_paths paths;
-    const char *prompt, *negative, *sampler, *noise, *image, *mask;
+    const char *prompt, *negative, *sampler, *noise, *image, *mask, *prefill_lama;
     int steps, width, height, karras;
-    double cfg, eta;
+    double cfg, eta, control_scale;
 } sd_cli;
 
 #define SD_OPTS(c)                                                                                                    \
@@ -50,6 +51,7 @@ static void sd_cli_init(sd_cli *c)
     c->height = d.height;
     c->cfg = d.cfg;
     c->sampler = "ddim";
+    c->control_scale = d.control_scale;
 }
 
 /* Checks the options every command shares; fills p (prompt, sampler, scale, seed). */
@@ -69,11 +71,11 @@ int g3d_sd_cli_sampling(const char *sampler, int steps, const char *steps_flag, 
                         g3d_sd_params *p)
 {
     int k = g3d_sd_sampler_parse(sampler);
-    if (k < 0) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sampler %s: ddim, pndm, euler, euler_a or dpmpp_2m expected", sampler);
+    if (k < 0) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sampler %s: ddim, pndm, plms, euler, euler_a or dpmpp_2m expected", sampler);
     if (steps < 1 || steps > 1000) return g3d_cli_errorf(G3D_EXIT_USAGE, "%s must be 1 to 1000", steps_flag);
     if (!(cfg >= 0 && cfg <= 100)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--cfg must be 0 to 100");
     if (!(eta >= 0 && eta <= 1)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--eta must be 0 to 1");
-    if (karras && (k == G3D_SD_DDIM || k == G3D_SD_PNDM)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--karras is for euler, euler_a and dpmpp_2m");
+    if (karras && (k == G3D_SD_DDIM || k == G3D_SD_PNDM || k == G3D_SD_PLMS)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--karras is for euler, euler_a and dpmpp_2m");
     p->sampler = (g3d_sd_sampler){(g3d_sd_sampler_kind)k, steps, (float)eta, karras, G3D_SD_PRED_EPS};
     p->cfg = (float)cfg;
     return G3D_EXIT_OK;
@@ -162,6 +164,26 @@ int g3d_sd_cli_txt2img(int argc, char **argv)
     return rc;
 }
 
+/* The ControlNet's hint with the masked pixels filled by LaMa (the "inpaint + LaMa" recipe). */
+static g3d_status lama_hint(const sd_cli *c, const g3d_sd *m, const g3d_image *img, const g3d_image *mask, g3d_image *hint)
+{
+    g3d_inpainter lama = {0};
+    g3d_image pre = {0}, bin = {0};
+    g3d_status rc = g3d_inpainter_lama_create(c->prefill_lama, &lama);
+    if (rc == G3D_OK) rc = g3d_image_clone(&pre, img);
+    if (rc == G3D_OK) rc = g3d_image_clone(&bin, mask);
+    for (size_t i = 0; rc == G3D_OK && i < g3d_image_size(&bin); i++) bin.data[i] = bin.data[i] > 0.5f;
+    if (rc == G3D_OK) rc = lama.inpaint(lama.ctx, &pre, &bin, NULL, 0);
+    /* the hint is 8 times the latent: the picture's size for SD's VAE */
+    int f = g3d_sd_size_multiple(m) >> (g3d_sd_get_unet(m)->levels - 1);
+    if (rc == G3D_OK)
+        rc = g3d_sd_inpaint_hint(img, mask, &pre, img->w / f * G3D_SD_HINT_FACTOR, img->h / f * G3D_SD_HINT_FACTOR, hint);
+    g3d_inpainter_free(&lama);
+    g3d_image_free(&pre);
+    g3d_image_free(&bin);
+    return rc;
+}
+
 int g3d_sd_cli_inpaint(int argc, char **argv)
 {
     sd_cli c;
@@ -170,6 +192,9 @@ int g3d_sd_cli_inpaint(int argc, char **argv)
         SD_OPTS(&c),
         {'i', "image", G3D_OPT_STRING, &c.image, "IMAGE", "the picture (PNG or JPEG)"},
         {0, "mask", G3D_OPT_STRING, &c.mask, "MASK", "what to fill: white (> 50 %) pixels, same size as the picture"},
+        {0, "controlnet", G3D_OPT_STRING, &c.paths.controlnet, "CN", "inpainting ControlNet (control_v11p_sd15_inpaint.pth)"},
+        {0, "control-scale", G3D_OPT_DOUBLE, &c.control_scale, "S", "the ControlNet's strength"},
+        {0, "prefill-lama", G3D_OPT_STRING, &c.prefill_lama, "CKPT", "fill the ControlNet's hint with LaMa (big-lama best.ckpt) first"},
         G3D_COMMON_OPTS(&c.common),
     };
     char desc[2048];
@@ -178,18 +203,25 @@ int g3d_sd_cli_inpaint(int argc, char **argv)
              "channels) sees the mask and the masked picture; a text-to-image model inpaints by latent\n"
              "blending (said on stderr). The known pixels are pasted back, with an 8-pixel feathered seam\n"
              "inside the mask. The picture's sides must be multiples of 64 for SD (the VAE's 8 times the\n"
-             "UNet's three halvings).\n%s", DESC_COMMON);
+             "UNet's three halvings).\n"
+             "--controlnet adds an inpainting ControlNet (control_v11p_sd15_inpaint, for SD 1.x; the\n"
+             "diffusers folder too) to every step; its hint is the picture with the masked pixels at -1,\n"
+             "or, with --prefill-lama, with them filled by LaMa first.\n%s", DESC_COMMON);
     const char *pos[1];
     int npos, prc = g3d_cli_parse(argc, argv, opts, G3D_COUNTOF(opts),
                                   "gen3d inpaint -m MODEL -i IMAGE --mask MASK -p PROMPT [-n NEGATIVE] [--steps N] [--cfg S] "
-                                  "[--sampler NAME] [-s SEED] -o OUT.png",
+                                  "[--sampler NAME] [--controlnet CN [--control-scale S] [--prefill-lama CKPT]] [-s SEED] -o OUT.png",
                                   desc, pos, 0, &npos);
     if (prc) return prc < 0 ? G3D_EXIT_OK : prc;
     g3d_sd_params p;
     int rc = sd_cli_params(&c, &p, "inpaint");
     if (rc) return rc;
     if (!c.image || !c.mask) return g3d_cli_errorf(G3D_EXIT_USAGE, "-i IMAGE and --mask MASK are required");
-    g3d_image img = {0}, mask = {0}, out = {0};
+    if ((c.prefill_lama || c.control_scale != 1.0) && !c.paths.controlnet)
+        return g3d_cli_errorf(G3D_EXIT_USAGE, "%s is for a --controlnet", c.prefill_lama ? "--prefill-lama" : "--control-scale");
+    if (!(c.control_scale >= 0 && c.control_scale <= 10)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--control-scale must be 0 to 10");
+    p.control_scale = (float)c.control_scale;
+    g3d_image img = {0}, mask = {0}, out = {0}, hint = {0};
     g3d_status st = g3d_image_load(c.image, 3, &img);
     if (st == G3D_OK) st = g3d_image_load(c.mask, 1, &mask);
     if (st != G3D_OK) return g3d_cli_fail(st);
@@ -202,12 +234,15 @@ int g3d_sd_cli_inpaint(int argc, char **argv)
     if (rc == G3D_EXIT_OK) {
         if (g3d_sd_get_unet(m)->in_ch == 4)
             g3d_log(G3D_LOG_INFO, "%s is a text-to-image model: inpainting by latent blending", c.paths.model);
-        st = g3d_sd_inpaint(m, &p, &img, &mask, &out);
+        st = c.prefill_lama ? lama_hint(&c, m, &img, &mask, &hint) : G3D_OK;
+        if (hint.data) p.control = &hint;
+        if (st == G3D_OK) st = g3d_sd_inpaint(m, &p, &img, &mask, &out);
         rc = st == G3D_OK ? sd_cli_save(&c, &out) : g3d_cli_fail(st);
     }
     g3d_image_free(&img);
     g3d_image_free(&mask);
     g3d_image_free(&out);
+    g3d_image_free(&hint);
     g3d_array_free(&noise);
     g3d_sd_free(m);
     return rc;

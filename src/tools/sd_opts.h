@@ -8,7 +8,7 @@
 /* The sampling options (the fields: double cfg, const char *sampler, int karras, double eta). */
 #define G3D_SD_SAMPLING_OPTS(cfg, sampler, karras, eta)                                                           \
     {0, "cfg", G3D_OPT_DOUBLE, cfg, "S", "classifier-free guidance scale (1: none)"},                             \
-    {0, "sampler", G3D_OPT_STRING, sampler, "NAME", "ddim, pndm, euler, euler_a or dpmpp_2m"},                    \
+    {0, "sampler", G3D_OPT_STRING, sampler, "NAME", "ddim, pndm, plms, euler, euler_a or dpmpp_2m"},                  \
     {0, "karras", G3D_OPT_FLAG, karras, NULL, "Karras sigmas (euler, euler_a, dpmpp_2m)"},                        \
     {0, "eta", G3D_OPT_DOUBLE, eta, "E", "DDIM's eta (0: deterministic)"}
 
