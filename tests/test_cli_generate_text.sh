@@ -60,6 +60,18 @@ expect 0 "RGB-D input, background by the model" "$GEN3D" generate --default-inpu
 grep -Eq '"foreground_objects":[[:space:]]*[1-9]' "$T/rgbd-bg/summary.json" && grep -Eq '"seconds_background":[[:space:]]*[0-9.]*[1-9]' "$T/rgbd-bg/summary.json" \
     && [ -s "$T/rgbd-bg/dataset/layers/bg_rgb.png" ] && ok "the background layer filled, timed" || bad "background layer: $(grep -E 'foreground|background' "$T/rgbd-bg/summary.json")"
 
+# the background by the inpainting ControlNet on a LaMa-prefilled hint (the fixtures fit the 9-channel UNet)
+M9="$FIX/sdinpaint_unet_tiny.safetensors"
+CN="$FIX/sdcontrol_tiny.pth"
+# shellcheck disable=SC2086
+expect 0 "RGB-D input, background by the ControlNet" "$GEN3D" generate --default-input "$MB" --max-side 64 --inpaint-model "$M9" \
+    --controlnet "$CN" --inpainter lama --lama-model "$FIX/lama_tiny.ckpt" $PARTS $SMALL --no-video -o "$T/rgbd-cn"
+grep -q "background: .*sdcontrol_tiny.pth (ControlNet for SD 1.x.*prefilled by lama" "$T/err" && ok "the ControlNet and its LaMa prefill named" \
+    || bad "ControlNet log: $(grep background "$T/err")"
+grep -q '"controlnet_model":[[:space:]]*".*sdcontrol_tiny.pth"' "$T/rgbd-cn/config.json" && [ -s "$T/rgbd-cn/dataset/layers/bg_rgb.png" ] \
+    && ok "config.json names the ControlNet; the background saved" || bad "ControlNet run: config or background missing"
+grep -q "lama-model is not used" "$T/err" && bad "LaMa called unused though it prefills" || ok "LaMa used for the prefill"
+
 # RGB-D input with a prompt and no model to use it: a warning, the run goes on
 expect 0 "RGB-D input with an unused prompt" "$GEN3D" generate --default-input "$MB" --max-side 48 -p "a motorcycle" $SMALL --no-video -o "$T/rgbd"
 grep -q "prompt is not used" "$T/err" && ok "the unused prompt is named" || bad "no warning for the unused prompt"
@@ -81,6 +93,13 @@ refuse "an inpainting UNet as --sd-model" --sd-model sdunet_sd2_tiny.safetensors
     "$GEN3D" generate -p x --sd-model "$FIX/sdunet_sd2_tiny.safetensors" --depth-model "$MOGE" -q -o "$T/bad"
 refuse "a depth model as --inpaint-model" --inpaint-model "$MOGE" \
     "$GEN3D" generate --default-input "$MB" --inpaint-model "$MOGE" -q -o "$T/bad"
+refuse "a LaMa checkpoint as --controlnet" --controlnet lama_tiny.ckpt \
+    "$GEN3D" generate --default-input "$MB" --inpaint-model "$M9" --controlnet "$FIX/lama_tiny.ckpt" -q -o "$T/bad"
+# shellcheck disable=SC2086
+refuse "a ControlNet of another base model" --controlnet sdcontrol_tiny.pth \
+    "$GEN3D" generate --default-input "$MB" --inpaint-model "$SD" --controlnet "$CN" $PARTS -q -o "$T/bad"
+expect 2 "--controlnet without --inpaint-model" "$GEN3D" generate --default-input "$MB" --controlnet "$CN" -q -o "$T/bad"
+[ ! -e "$T/bad" ] && ok "--controlnet alone: no output folder" || { bad "--controlnet alone: output folder written"; rm -rf "$T/bad"; }
 refuse "a diffusion model as --lama-model" --lama-model "$SD" \
     "$GEN3D" generate --default-input "$MB" --inpainter lama --lama-model "$SD" -q -o "$T/bad"
 mkdir -p "$T/tok"

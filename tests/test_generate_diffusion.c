@@ -10,6 +10,7 @@
 #include "gen3d/describe.h"
 #include "gen3d/generate.h"
 #include "gen3d/imageio.h"
+#include "gen3d/inpaint_classic.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -229,6 +230,75 @@ TEST(middlebury_inpainting_model)
     middlebury("Middlebury, inpainting model", path);
 }
 
+/* The background's ControlNet (sd_views.h with a prefill): the prefill inpainter fills the
+ * picture the model draws (the padded, scaled view and its grown hole), its colours reach the
+ * ControlNet's hint and so the picture; known pixels stay as they were. */
+TEST(controlnet_prefill)
+{
+    g3d_sd_paths sp = parts();
+    static char unet[1024], cn[1024];
+    snprintf(unet, sizeof unet, "%s", test_fixture("sdinpaint_unet_tiny.safetensors"));
+    snprintf(cn, sizeof cn, "%s", test_fixture("sdcontrol_tiny.pth"));
+    sp.model = unet;
+    sp.controlnet = cn;
+    g3d_image view = {0}, mask = {0};
+    CHECK_OK(g3d_image_create(&view, 40, 28, 3));
+    CHECK_OK(g3d_image_create(&mask, 40, 28, 1));
+    if (!view.data || !mask.data) return;
+    for (int y = 0; y < 28; y++)
+        for (int x = 0; x < 40; x++) {
+            float *px = g3d_image_px(&view, x, y);
+            px[0] = x / 40.0f, px[1] = y / 28.0f, px[2] = 0.3f;
+            mask.data[y * 40 + x] = x >= 12 && x < 26 && y >= 8 && y < 20;
+        }
+    g3d_inpainter classic = {0}, with[2] = {{0}};
+    recorder rec;
+    memset(&rec, 0, sizeof rec);
+    rec.inner = &classic;
+    g3d_inpainter wrap = {"recorder", &rec, record, NULL};
+    CHECK_OK(g3d_inpainter_classic_create(NULL, &classic));
+    for (int k = 0; k < 2; k++) {
+        g3d_sd *m = NULL;
+        CHECK_OK(g3d_sd_load(&sp, &m));
+        if (!m) break;
+        CHECK(g3d_sd_get_controlnet(m) != NULL);
+        g3d_sd_view_params vp;
+        g3d_sd_view_params_default(&vp);
+        vp.size = 32;
+        vp.sd.sampler.steps = 2;
+        vp.prefill = k ? &wrap : NULL;
+        CHECK_OK(g3d_inpainter_sd_views_create(m, &vp, &with[k]));
+    }
+    g3d_image out[2] = {{0}};
+    for (int k = 0; k < 2 && with[k].inpaint; k++) {
+        CHECK_OK(g3d_image_clone(&out[k], &view));
+        CHECK_OK(with[k].inpaint(with[k].ctx, &out[k], &mask, g_prompt, 3));
+    }
+    /* one prefill call, on the picture the model draws: 32 x 22 padded to 32 x 24 (multiple 8) */
+    CHECK_MSG(rec.calls == 1, "%d prefill calls", rec.calls);
+    CHECK_MSG(rec.known_changed == 0 && rec.bad_masks == 0, "prefill: %zu known pixels changed, %zu bad masks", rec.known_changed,
+              rec.bad_masks);
+    int dw, dh, pw, ph;
+    g3d_sd_view_geometry(40, 28, 32, 8, &dw, &dh, &pw, &ph);
+    CHECK(rec.calls < 1 || (rec.mask[0].w == pw && rec.mask[0].h == ph));
+    size_t known_changed = 0, differ = 0;
+    for (size_t i = 0; out[0].data && out[1].data && i < (size_t)40 * 28; i++) {
+        for (int k = 0; k < 2; k++)
+            if (mask.data[i] < 0.5f) known_changed += memcmp(&out[k].data[3 * i], &view.data[3 * i], 3 * sizeof(float)) != 0;
+        if (mask.data[i] > 0.5f) differ += memcmp(&out[0].data[3 * i], &out[1].data[3 * i], 3 * sizeof(float)) != 0;
+    }
+    CHECK_MSG(known_changed == 0, "%zu known pixels changed", known_changed);
+    CHECK_MSG(differ > 0, "the prefilled hint changed no hole pixel");
+    for (int k = 0; k < 2; k++) {
+        g3d_inpainter_free(&with[k]);
+        g3d_image_free(&out[k]);
+    }
+    g3d_inpainter_free(&classic);
+    recorder_free(&rec);
+    g3d_image_free(&view);
+    g3d_image_free(&mask);
+}
+
 int main(int argc, char **argv)
 {
     (void)argc;
@@ -237,5 +307,6 @@ int main(int argc, char **argv)
     RUN(text_input);
     RUN(middlebury_text_to_image_model);
     RUN(middlebury_inpainting_model);
+    RUN(controlnet_prefill);
     return test_summary();
 }

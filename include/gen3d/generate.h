@@ -26,7 +26,8 @@
  *   caller keeps ownership; e.g. a diffusion inpainter or a segmentation model) or, when NULL,
  *   made by the run from the parameters and released at its end: Stable Diffusion from
  *   `inpaint_model` (sd_views.h), else LaMa from `lama_model`, else the classical inpainter,
- *   for the views and the background alike; the depth model in `depth_model` or else depth
+ *   for the views and the background alike (the background by the ControlNet of
+ *   `controlnet_model` on a LaMa-prefilled hint when given); the depth model in `depth_model` or else depth
  *   completion, the weight-free region proposals (regions.h). A plug-in's own parameters go to
  *   its create function.
  *
@@ -116,6 +117,12 @@ typedef struct g3d_generate_params {
     const char *inpaint_model;            /* Stable Diffusion inpainting (or text-to-image) model
                                              for every new view and the background (sd_views.h);
                                              NULL: LaMa / classical as above */
+    const char *controlnet_model;         /* the inpainting ControlNet (control_v11p_sd15_inpaint)
+                                             for the background behind the foreground, with
+                                             inpaint_model as its base: the hole is prefilled by
+                                             LaMa (lama_model), else the classical inpainter, and
+                                             that picture is the ControlNet's hint (sd_views.h);
+                                             ignored when bg_inpainter is given */
     g3d_sd_paths sd_parts;                /* vae, text_encoder, tokenizer, yaml, prediction for
                                              both models (model is ignored) */
     g3d_sd_view_params diffusion;         /* negative prompt, sampler, steps, guidance, native

@@ -280,7 +280,10 @@ typedef struct g3d_sd_params {
     uint64_t seed;            /* the initial noise (and ancestral noise) */
     const float *noise;       /* the initial latent noise [z_ch, height/f, width/f] instead of the seed's, or NULL */
     const g3d_image *control; /* the ControlNet's hint, (8 width/f) x (8 height/f) (the picture's size for SD),
-                                 hint_ch channels; NULL: inpainting builds the inpainting hint itself */
+                                 hint_ch channels; NULL: inpainting builds the inpainting hint itself,
+                                 from `prefill` when given (g3d_sd_inpaint_hint) */
+    const g3d_image *prefill; /* inpainting with a ControlNet: the picture with its hole already filled
+                                 (e.g. by LaMa), the picture's size; the hint takes its colours there */
     float control_scale;      /* the ControlNet's residuals are multiplied by this (1) */
     g3d_progress progress;    /* stage "denoise": step, total */
     int truncated;            /* out: prompt tokens dropped because they did not fit (both prompts) */

@@ -34,6 +34,11 @@ typedef struct g3d_sd_view_params {
                                 down to the model's size multiple, one multiple at least */
     int dilate;              /* the hole grown by this many view pixels for the model (4) */
     g3d_progress progress;   /* each call's denoising steps: stage "denoise", step of total */
+    const g3d_inpainter *prefill; /* with a ControlNet loaded (sd.h): fills the hole of the
+                                picture the model draws first (e.g. LaMa), and the ControlNet's
+                                hint carries those colours (g3d_sd_inpaint_hint); NULL: the
+                                hint's hole is -1, as in the official inpainting demo. The
+                                caller keeps it alive while the plug-in runs */
 } g3d_sd_view_params;
 
 /* The negative prompt of the defaults. */

@@ -526,7 +526,7 @@ g3d_status g3d_sd_inpaint(const g3d_sd *m, g3d_sd_params *p, const g3d_image *im
             L.noise0 = noise0;
         }
         if (m->cn && !p->control) {
-            rc = g3d_sd_inpaint_hint(image, mask, NULL, L.w * G3D_SD_HINT_FACTOR, L.h * G3D_SD_HINT_FACTOR, &hint);
+            rc = g3d_sd_inpaint_hint(image, mask, p->prefill, L.w * G3D_SD_HINT_FACTOR, L.h * G3D_SD_HINT_FACTOR, &hint);
             p->control = &hint;
         }
         if (rc == G3D_OK) rc = generate(&L, x, out);

@@ -81,12 +81,21 @@ static g3d_status pad(const g3d_image *src, int pw, int ph, g3d_image *out)
     return G3D_OK;
 }
 
+/* The picture the model draws with its hole filled by the prefill inpainter: the ControlNet's
+ * hint takes its colours there. */
+static g3d_status prefill(const views *v, const g3d_image *pic, const g3d_image *mask, const char *prompt, uint64_t seed,
+                          g3d_image *pre)
+{
+    G3D_TRY(g3d_image_clone(pre, pic));
+    return v->p.prefill->inpaint(v->p.prefill->ctx, pre, mask, prompt, seed);
+}
+
 static g3d_status views_inpaint(void *ctx, g3d_image *image, const g3d_image *mask, const char *prompt, uint64_t seed)
 {
     views *v = ctx;
     int W = image->w, H = image->h, dw, dh, pw, ph;
     g3d_sd_view_geometry(W, H, v->p.size, g3d_sd_size_multiple(v->m), &dw, &dh, &pw, &ph);
-    g3d_image grown = {0}, small = {0}, smask = {0}, pimg = {0}, pmask = {0}, out = {0}, crop = {0}, back = {0};
+    g3d_image grown = {0}, small = {0}, smask = {0}, pimg = {0}, pmask = {0}, out = {0}, crop = {0}, back = {0}, pre = {0};
     g3d_status rc = grow(mask, v->p.dilate, &grown);
     if (rc == G3D_OK) rc = g3d_image_resize(image, dw, dh, G3D_RESIZE_BILINEAR_AA, &small);
     if (rc == G3D_OK) rc = g3d_image_resize(&grown, dw, dh, G3D_RESIZE_BILINEAR_AA, &smask);
@@ -95,8 +104,10 @@ static g3d_status views_inpaint(void *ctx, g3d_image *image, const g3d_image *ma
     if (rc == G3D_OK) rc = pad(&small, pw, ph, &pimg);
     if (rc == G3D_OK) rc = g3d_image_create(&pmask, pw, ph, 1);
     for (int y = 0; rc == G3D_OK && y < dh; y++) memcpy(g3d_image_px(&pmask, 0, y), g3d_image_px(&smask, 0, y), sizeof(float) * dw);
+    if (rc == G3D_OK && v->p.prefill && g3d_sd_get_controlnet(v->m)) rc = prefill(v, &pimg, &pmask, prompt, seed, &pre);
     if (rc == G3D_OK) {
         g3d_sd_params p = v->p.sd;
+        if (pre.data) p.prefill = &pre;
         if (!p.prompt) p.prompt = prompt ? prompt : "";
         p.seed = seed;
         p.noise = NULL;
@@ -112,7 +123,7 @@ static g3d_status views_inpaint(void *ctx, g3d_image *image, const g3d_image *ma
                 float x = back.data[3 * i + c];
                 image->data[3 * i + c] = x < 0 ? 0 : x > 1 ? 1 : x;
             }
-    g3d_image *all[] = {&grown, &small, &smask, &pimg, &pmask, &out, &crop, &back};
+    g3d_image *all[] = {&grown, &small, &smask, &pimg, &pmask, &out, &crop, &back, &pre};
     for (size_t i = 0; i < sizeof all / sizeof all[0]; i++) g3d_image_free(all[i]);
     return rc;
 }

@@ -68,6 +68,7 @@ typedef struct run {
     g3d_frame frame;                   /* loaded here, unless p->frame */
     const g3d_frame *input;
     g3d_inpainter own_inpainter;
+    g3d_inpainter own_bg, own_prefill; /* the ControlNet's background inpainter and its prefill */
     g3d_depth_estimator own_depth;
     g3d_mask_provider own_masks;
     g3d_prompt_provider own_prompts;   /* the automatic prompts made here */
@@ -140,7 +141,9 @@ static g3d_status check_params(const g3d_generate_params *p)
         if (!p->depth && !p->depth_model)
             return G3D_ERR(G3D_ERR_ARG, "%s: text input needs a depth model (MoGe-2) for the image's depth", p->sd_model);
     }
-    if ((p->sd_model || p->inpaint_model) &&
+    if (p->controlnet_model && !p->bg_inpainter && !p->inpaint_model)
+        return G3D_ERR(G3D_ERR_ARG, "%s: the ControlNet needs its base model: give an inpainting model", p->controlnet_model);
+    if ((p->sd_model || p->inpaint_model || p->controlnet_model) &&
         (p->diffusion.size < 8 || p->diffusion.size > 4096 || p->diffusion.dilate < 0 || p->diffusion.dilate > 64))
         return G3D_ERR(G3D_ERR_ARG, "generate: diffusion size %d (need 8..4096) or dilation %d (need 0..64)", p->diffusion.size,
                        p->diffusion.dilate);
@@ -205,6 +208,16 @@ static g3d_status make_depth(run *r)
     return G3D_OK;
 }
 
+/* LaMa from p->lama_model, else the classical inpainter, into *out; role names it in the log. */
+static g3d_status make_lama_or_classic(const g3d_generate_params *p, const char *role, g3d_inpainter *out)
+{
+    if (!p->lama_model) return g3d_inpainter_classic_create(NULL, out);
+    G3D_TRY(g3d_inpainter_lama_create(p->lama_model, out));
+    char desc[256];
+    g3d_log(G3D_LOG_INFO, "%s: %s (%s)", role, p->lama_model, g3d_lama_describe(out->ctx, desc, sizeof desc));
+    return G3D_OK;
+}
+
 /* The inpainter: the caller's, LaMa from p->lama_model, or the classical one. Made before the
  * input is loaded, so that a bad checkpoint fails before any work. */
 static g3d_status make_inpainter(run *r)
@@ -223,11 +236,29 @@ static g3d_status make_inpainter(run *r)
         vp.progress = r->progress;
         return g3d_inpainter_sd_views_create(m, &vp, &r->own_inpainter);
     }
-    if (!p->lama_model) return g3d_inpainter_classic_create(NULL, &r->own_inpainter);
-    G3D_TRY(g3d_inpainter_lama_create(p->lama_model, &r->own_inpainter));
-    char desc[256];
-    g3d_log(G3D_LOG_INFO, "inpainter: %s (%s)", p->lama_model, g3d_lama_describe(r->own_inpainter.ctx, desc, sizeof desc));
-    return G3D_OK;
+    return make_lama_or_classic(p, "inpainter", &r->own_inpainter);
+}
+
+/* The background's inpainter when a ControlNet is given: the inpainting model with the
+ * ControlNet, its hint's hole prefilled by LaMa or the classical inpainter. */
+static g3d_status make_bg_inpainter(run *r)
+{
+    const g3d_generate_params *p = r->p;
+    if (!p->layers || p->bg_inpainter || !p->controlnet_model) return G3D_OK;
+    G3D_TRY(make_lama_or_classic(p, "background prefill", &r->own_prefill));
+    g3d_sd_paths paths = p->sd_parts;
+    g3d_sd *m;
+    paths.model = p->inpaint_model;
+    paths.controlnet = p->controlnet_model;
+    G3D_TRY(g3d_sd_load(&paths, &m));
+    char desc[512];
+    g3d_log(G3D_LOG_INFO, "background: %s (%s), hint prefilled by %s", p->controlnet_model,
+            g3d_sd_controlnet_describe(g3d_sd_controlnet_get_config(g3d_sd_get_controlnet(m)), desc, sizeof desc),
+            r->own_prefill.name);
+    g3d_sd_view_params vp = p->diffusion;
+    vp.progress = r->progress;
+    vp.prefill = &r->own_prefill;
+    return g3d_inpainter_sd_views_create(m, &vp, &r->own_bg);
 }
 
 /* The run's prompts (generate.h, PROMPTS): the user's view prompt, else the provider's, else
@@ -306,6 +337,7 @@ static g3d_status stage_input(run *r)
 {
     const g3d_generate_params *p = r->p;
     G3D_TRY(make_inpainter(r));
+    G3D_TRY(make_bg_inpainter(r));
     G3D_TRY(make_prompts(r));
     G3D_TRY(make_depth(r));
     if (p->frame) {
@@ -353,7 +385,7 @@ static g3d_status stage_layers(run *r)
     const g3d_frame *f = r->input;
     g3d_layers_params lp = p->layers_params;
     if (r->prompts) lp.prompts = r->prompts;
-    r->bg_inner = p->bg_inpainter ? p->bg_inpainter : r->inpainter;
+    r->bg_inner = p->bg_inpainter ? p->bg_inpainter : r->own_bg.inpaint ? &r->own_bg : r->inpainter;
     r->bg_timed = (g3d_inpainter){r->bg_inner->name, r, timed_inpaint, NULL};
     snprintf(r->label, sizeof r->label, "background");
     G3D_TRY(g3d_layers_compute(&f->rgb, &f->depth, r->masks, &r->bg_timed, r->depth, &lp, p->seed, &r->layers));
@@ -674,6 +706,7 @@ static cJSON *config_json(const run *r)
         if (p->prompt) cJSON_AddStringToObject(c, "prompt", p->prompt);
         if (p->sd_model) cJSON_AddStringToObject(c, "sd_model", p->sd_model);
         if (p->inpaint_model && !p->inpainter) cJSON_AddStringToObject(c, "inpaint_model", p->inpaint_model);
+        if (r->own_bg.inpaint) cJSON_AddStringToObject(c, "controlnet_model", p->controlnet_model);
         if (p->sd_model || (p->inpaint_model && !p->inpainter)) cJSON_AddItemToObject(c, "diffusion", diffusion_json(p));
         if (r->prompts) {
             const char *bg = p->layers ? r->layers.bg_prompt : r->bg_prompt, *view = p->layers ? r->layers.view_prompt : r->view_prompt;
@@ -835,6 +868,8 @@ static void run_free(run *r)
     g3d_world_free(&r->world);
     g3d_gaussians_free(&r->scene);
     g3d_inpainter_free(&r->own_inpainter);
+    g3d_inpainter_free(&r->own_bg);
+    g3d_inpainter_free(&r->own_prefill);
     g3d_depth_estimator_free(&r->own_depth);
     g3d_mask_provider_free(&r->own_masks);
     g3d_prompt_provider_free(&r->own_prompts);

@@ -36,6 +36,8 @@ static const char *description(void)
                      "with Stable Diffusion (an inpainting checkpoint such as sd-v1-5-inpainting.ckpt; a\n"
                      "text-to-image one inpaints by latent blending, said once), at --sd-size and back, the\n"
                      "known pixels kept exactly; without it LaMa (--inpainter lama) or PatchMatch fill them.\n"
+                     "--controlnet CN (control_v11p_sd15_inpaint) fills the background through the ControlNet,\n"
+                     "its hint prefilled by LaMa (--lama-model) or PatchMatch, as the paper does.\n"
                      "Prompts: -p for the views (and the text input); else --clip and --caption-model write\n"
                      "them (as `gen3d describe`): the background template \"high-resolution [category]\n"
                      "background with [colours] colors, photorealistic, 8K\" and BLIP's caption for the views;\n"

@@ -4,6 +4,7 @@
 #include "gen3d/clip_text.h"
 #include "gen3d/recognize.h"
 
+#include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 
@@ -31,6 +32,7 @@ int g3d_cli_diffusion_check(const g3d_cli_diffusion *d, int rgb, int depth_model
     if (d->sd_model && rgb) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sd-model draws the first image: no -i");
     if (d->sd_model && !depth_model)
         return g3d_cli_errorf(G3D_EXIT_USAGE, "text input needs --depth-model (MoGe-2) for the drawn image's depth and camera");
+    if (d->controlnet && !d->inpaint_model) return g3d_cli_errorf(G3D_EXIT_USAGE, "--controlnet needs --inpaint-model (its base model)");
     if (!d->sd_model && !d->inpaint_model && (d->parts.vae || d->parts.text_encoder || d->parts.tokenizer || d->parts.yaml))
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--vae, --text-encoder, --tokenizer and --sd-config go with --sd-model or --inpaint-model");
     return 0;
@@ -44,11 +46,12 @@ void g3d_cli_diffusion_apply(const g3d_cli_diffusion *d, g3d_generate_params *p)
     p->prompt = d->prompt;
     p->sd_model = d->sd_model;
     p->inpaint_model = d->inpaint_model;
+    p->controlnet_model = d->controlnet;
     p->sd_parts = d->parts;
     if (d->prompt && !d->sd_model && !d->inpaint_model)
         g3d_log(G3D_LOG_WARN, "the prompt is not used: without --inpaint-model the views are filled by an inpainter that "
                               "takes no text");
-    if (d->inpaint_model && p->lama_model)
+    if (d->inpaint_model && p->lama_model && !d->controlnet)
         g3d_log(G3D_LOG_WARN, "--lama-model is not used: --inpaint-model fills the views and the background");
 }
 
@@ -61,6 +64,7 @@ static const char *kind_name(g3d_model_kind k)
     case G3D_MODEL_LAMA: return "a LaMa inpainter";
     case G3D_MODEL_SAM: return "a Segment Anything model";
     case G3D_MODEL_STABLE_DIFFUSION: return "a Stable Diffusion model";
+    case G3D_MODEL_CONTROLNET: return "a ControlNet";
     default: return "no model gen3d recognises";
     }
 }
@@ -88,6 +92,29 @@ static int check_kind(const char *flag, const char *path, g3d_model_kind a, g3d_
     return rc;
 }
 
+/* 0 when the ControlNet file fits the inpainting model's UNet (both single files; folders are
+ * left to the loader); else one line naming --controlnet and the file, G3D_EXIT_FAIL. */
+static int check_controlnet_fits(const char *cn_path, const char *unet_path)
+{
+    struct stat st;
+    if (!cn_path || !unet_path || stat(cn_path, &st) != 0 || S_ISDIR(st.st_mode) || stat(unet_path, &st) != 0 || S_ISDIR(st.st_mode))
+        return 0;
+    g3d_ckpt *cn = NULL, *un = NULL;
+    g3d_sd_controlnet_config cc;
+    g3d_sd_unet_config uc;
+    char *yaml = g3d_sd_yaml_beside(unet_path);
+    int rc = 0;
+    if (g3d_ckpt_open(cn_path, &cn) == G3D_OK && g3d_ckpt_open(unet_path, &un) == G3D_OK &&
+        g3d_sd_controlnet_probe(cn, NULL, &cc) == G3D_OK && g3d_sd_unet_probe(un, yaml, &uc) == G3D_OK &&
+        g3d_sd_controlnet_check(&cc, cn_path, &uc) != G3D_OK)
+        rc = g3d_cli_errorf(G3D_EXIT_FAIL, "--controlnet %s", g3d_error_message());
+    g3d_error_clear();
+    free(yaml);
+    g3d_ckpt_free(cn);
+    g3d_ckpt_free(un);
+    return rc;
+}
+
 int g3d_cli_check_models(const g3d_generate_params *p)
 {
     const g3d_model_kind sd = G3D_MODEL_STABLE_DIFFUSION;
@@ -95,6 +122,9 @@ int g3d_cli_check_models(const g3d_generate_params *p)
                         "a depth model (MoGe-2 or Depth Anything V2)");
     if (!rc) rc = check_kind("--sd-model", p->sd_model, sd, sd, 4, "a Stable Diffusion text-to-image model");
     if (!rc) rc = check_kind("--inpaint-model", p->inpaint_model, sd, sd, 0, "a Stable Diffusion inpainting model");
+    if (!rc) rc = check_kind("--controlnet", p->controlnet_model, G3D_MODEL_CONTROLNET, G3D_MODEL_CONTROLNET, 0,
+                             "an inpainting ControlNet (control_v11p_sd15_inpaint)");
+    if (!rc) rc = check_controlnet_fits(p->controlnet_model, p->inpaint_model);
     if (!rc) rc = check_kind("--lama-model", p->lama_model, G3D_MODEL_LAMA, G3D_MODEL_LAMA, 0, "a LaMa checkpoint (big-lama best.ckpt)");
     if (!rc) rc = check_kind("--seg-model", p->seg_model, G3D_MODEL_SAM, G3D_MODEL_SAM, 0, "a Segment Anything checkpoint");
     if (!rc && p->sd_parts.tokenizer && (p->sd_model || p->inpaint_model)) {

@@ -8,7 +8,7 @@
 #include "sd_opts.h"
 
 typedef struct g3d_cli_diffusion {
-    const char *prompt, *negative, *sampler, *sd_model, *inpaint_model;
+    const char *prompt, *negative, *sampler, *sd_model, *inpaint_model, *controlnet;
     g3d_sd_paths parts;          /* vae, text_encoder, tokenizer, yaml for both models */
     int steps, karras, size;
     double cfg, eta;
@@ -19,6 +19,7 @@ typedef struct g3d_cli_diffusion {
     {'n', "negative", G3D_OPT_STRING, &(d)->negative, "TEXT", "what the diffusion models avoid (negative prompt)"}, \
     {0, "sd-model", G3D_OPT_PATH, &(d)->sd_model, "MODEL", "text input: Stable Diffusion text-to-image model drawing the first image"}, \
     {0, "inpaint-model", G3D_OPT_PATH, &(d)->inpaint_model, "MODEL", "Stable Diffusion (inpainting) model filling the new views and the background"}, \
+    {0, "controlnet", G3D_OPT_PATH, &(d)->controlnet, "MODEL", "inpainting ControlNet for the background (with --inpaint-model; its hint prefilled by --lama-model, else the classical inpainter)"}, \
     {0, "sd-steps", G3D_OPT_INT, &(d)->steps, "N", "denoising steps per image"},                                \
     G3D_SD_SAMPLING_OPTS(&(d)->cfg, &(d)->sampler, &(d)->karras, &(d)->eta),                                      \
     {0, "sd-size", G3D_OPT_INT, &(d)->size, "PX", "longer side the diffusion models draw at (their native size)"}, \
@@ -32,7 +33,7 @@ int g3d_cli_diffusion_check(const g3d_cli_diffusion *d, int rgb, int depth_model
 /* Copies the options into the pipeline's parameters; warns when the prompt has no model to use it. */
 void g3d_cli_diffusion_apply(const g3d_cli_diffusion *d, g3d_generate_params *p);
 /* Checks that each model flag of p names a model of its kind (--depth-model, --sd-model,
- * --inpaint-model, --lama-model, --seg-model) and that --tokenizer loads: returns 0, or
+ * --inpaint-model, --controlnet, --lama-model, --seg-model) and that --tokenizer loads: returns 0, or
  * G3D_EXIT_FAIL after one line naming the flag and the file. */
 int g3d_cli_check_models(const g3d_generate_params *p);
 

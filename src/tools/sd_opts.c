@@ -164,22 +164,18 @@ int g3d_sd_cli_txt2img(int argc, char **argv)
     return rc;
 }
 
-/* The ControlNet's hint with the masked pixels filled by LaMa (the "inpaint + LaMa" recipe). */
-static g3d_status lama_hint(const sd_cli *c, const g3d_sd *m, const g3d_image *img, const g3d_image *mask, g3d_image *hint)
+/* The picture with its masked pixels filled by LaMa, for the ControlNet's hint (the "inpaint +
+ * LaMa" recipe). */
+static g3d_status lama_prefill(const sd_cli *c, const g3d_image *img, const g3d_image *mask, g3d_image *pre)
 {
     g3d_inpainter lama = {0};
-    g3d_image pre = {0}, bin = {0};
+    g3d_image bin = {0};
     g3d_status rc = g3d_inpainter_lama_create(c->prefill_lama, &lama);
-    if (rc == G3D_OK) rc = g3d_image_clone(&pre, img);
+    if (rc == G3D_OK) rc = g3d_image_clone(pre, img);
     if (rc == G3D_OK) rc = g3d_image_clone(&bin, mask);
     for (size_t i = 0; rc == G3D_OK && i < g3d_image_size(&bin); i++) bin.data[i] = bin.data[i] > 0.5f;
-    if (rc == G3D_OK) rc = lama.inpaint(lama.ctx, &pre, &bin, NULL, 0);
-    /* the hint is 8 times the latent: the picture's size for SD's VAE */
-    int f = g3d_sd_size_multiple(m) >> (g3d_sd_get_unet(m)->levels - 1);
-    if (rc == G3D_OK)
-        rc = g3d_sd_inpaint_hint(img, mask, &pre, img->w / f * G3D_SD_HINT_FACTOR, img->h / f * G3D_SD_HINT_FACTOR, hint);
+    if (rc == G3D_OK) rc = lama.inpaint(lama.ctx, pre, &bin, NULL, 0);
     g3d_inpainter_free(&lama);
-    g3d_image_free(&pre);
     g3d_image_free(&bin);
     return rc;
 }
@@ -221,7 +217,7 @@ int g3d_sd_cli_inpaint(int argc, char **argv)
         return g3d_cli_errorf(G3D_EXIT_USAGE, "%s is for a --controlnet", c.prefill_lama ? "--prefill-lama" : "--control-scale");
     if (!(c.control_scale >= 0 && c.control_scale <= 10)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--control-scale must be 0 to 10");
     p.control_scale = (float)c.control_scale;
-    g3d_image img = {0}, mask = {0}, out = {0}, hint = {0};
+    g3d_image img = {0}, mask = {0}, out = {0}, pre = {0};
     g3d_status st = g3d_image_load(c.image, 3, &img);
     if (st == G3D_OK) st = g3d_image_load(c.mask, 1, &mask);
     if (st != G3D_OK) return g3d_cli_fail(st);
@@ -234,15 +230,15 @@ int g3d_sd_cli_inpaint(int argc, char **argv)
     if (rc == G3D_EXIT_OK) {
         if (g3d_sd_get_unet(m)->in_ch == 4)
             g3d_log(G3D_LOG_INFO, "%s is a text-to-image model: inpainting by latent blending", c.paths.model);
-        st = c.prefill_lama ? lama_hint(&c, m, &img, &mask, &hint) : G3D_OK;
-        if (hint.data) p.control = &hint;
+        st = c.prefill_lama ? lama_prefill(&c, &img, &mask, &pre) : G3D_OK;
+        if (pre.data) p.prefill = &pre;
         if (st == G3D_OK) st = g3d_sd_inpaint(m, &p, &img, &mask, &out);
         rc = st == G3D_OK ? sd_cli_save(&c, &out) : g3d_cli_fail(st);
     }
     g3d_image_free(&img);
     g3d_image_free(&mask);
     g3d_image_free(&out);
-    g3d_image_free(&hint);
+    g3d_image_free(&pre);
     g3d_array_free(&noise);
     g3d_sd_free(m);
     return rc;
