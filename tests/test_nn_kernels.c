@@ -244,6 +244,23 @@ TEST(conv_bad_configurations)
     CHECK_FAILS(g3d_nn_conv_forward(&c, x, 2, 2, y, NULL));
 }
 
+TEST(transpose_tile_against_reference)
+{
+    /* attention's query (w > nr: zero rows) and output (per-row scale, partial 16-blocks) tiles */
+    float *src = rnd(70 * 90, 31, 1), *rs = rnd(90, 32, 1), *d = malloc(sizeof(float) * 90 * 80),
+          *r = malloc(sizeof(float) * 90 * 80);
+    const int shapes[][3] = {{64, 40, 64}, {13, 40, 16}, {40, 64, 40}, {7, 9, 7}, {64, 64, 64}, {1, 1, 16}, {40, 23, 48}};
+    for (size_t s = 0; s < sizeof shapes / sizeof *shapes; s++)
+        for (int scaled = 0; scaled < 2; scaled++) {
+            const int nr = shapes[s][0], nc = shapes[s][1], w = shapes[s][2];
+            for (int i = 0; i < 90 * 80; i++) d[i] = r[i] = -7.0f;
+            nn_transpose_tile(src + 3, 90, nr, nc, d, 80, w, 0.3f, scaled ? rs : NULL);
+            nn_ref_transpose_tile(src + 3, 90, nr, nc, r, 80, w, 0.3f, scaled ? rs : NULL);
+            CHECK_MSG(!memcmp(d, r, sizeof(float) * 90 * 80), "transpose %d x %d -> w %d differs", nr, nc, w);
+        }
+    free(src), free(rs), free(d), free(r);
+}
+
 static void check_attention(g3d_nn_attn a, uint64_t seed, const char *what)
 {
     const int hdv = a.hdv ? a.hdv : a.hd, nb = a.batch ? a.batch : 1, nq = a.nq ? a.nq : 1, nk = a.nk ? a.nk : 1;
@@ -460,6 +477,7 @@ int main(void)
     find_isas();
     printf("kernels: %s (testing %d instruction sets)\n", g3d_nn_isa_name(), nisa);
     RUN(matmul_shapes_and_transposes);
+    RUN(transpose_tile_against_reference);
     RUN(linear_epilogues_and_16bit_weights);
     RUN(conv_against_reference);
     RUN(conv_bad_configurations);
