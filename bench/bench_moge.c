@@ -17,7 +17,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/wait.h>
 
 #define DEFAULT_MODEL G3D_SHARED_DIR "/golden/moge2_vits_config/model.pt"
 
@@ -80,9 +79,7 @@ static int twin(int argc, char **argv)
            "  gen3d is %.2fx faster than PyTorch in wall time, %.2fx in CPU time (medians of the rounds' ratios)\n",
            w, h, tokens, rounds, load0, load1, median(walls, rounds), median(cpus, rounds), median(wr, rounds),
            median(cr, rounds));
-    fclose(to);
-    fclose(from);
-    waitpid(py, NULL, 0);
+    twin_stop(to, from, py);
     free(rgb);
     g3d_moge_free(m);
     g3d_ckpt_free(ck);
