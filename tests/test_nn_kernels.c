@@ -123,7 +123,8 @@ typedef struct conv_case {
     g3d_nn_padmode mode;
 } conv_case;
 
-/* prepare: run through g3d_nn_conv_prepare (Winograd for 3x3 stride 1, phases for transposed) */
+/* prepare: run through g3d_nn_conv_prepare (Winograd for 3x3 stride 1, phases for transposed);
+ * 2: with wino_small (F(2x2) also where F(4x4) would be chosen) */
 static void check_conv(const conv_case *cc, g3d_dtype wt, const g3d_nn_epi *epi, uint64_t seed, int prepare)
 {
     const size_t nw = (size_t)cc->cout * (cc->cin / (cc->g ? cc->g : 1)) * cc->k * cc->k;
@@ -131,6 +132,7 @@ static void check_conv(const conv_case *cc, g3d_dtype wt, const g3d_nn_epi *epi,
     uint16_t *w16 = NULL;
     g3d_nn_conv c = g3d_nn_conv_make(cc->cin, cc->cout, cc->k, cc->s, cc->p, w, b);
     c.dilation = cc->d, c.groups = cc->g, c.pad_mode = cc->mode, c.transposed = cc->tr, c.output_padding = cc->op;
+    c.wino_small = prepare == 2;
     if (wt != G3D_DT_F32) {
         /* weights as 16-bit values: the reference reads them the same way */
         w16 = malloc(sizeof(uint16_t) * nw);
@@ -209,6 +211,7 @@ TEST(conv_against_reference)
     for (int i = 0; i < n; i++) {
         check_conv(&cases[i], G3D_DT_F32, NULL, 10 + i, 0);
         check_conv(&cases[i], G3D_DT_F32, NULL, 10 + i, 1);
+        check_conv(&cases[i], G3D_DT_F32, NULL, 10 + i, 2);
     }
     /* epilogues, 16-bit weights */
     for (int i = 0; i < n; i++) {
@@ -418,6 +421,9 @@ TEST(independent_of_thread_count)
         g3d_nn_conv_release(&c);
         got[6] = malloc(sizeof(float) * 70 * h * w);
         g3d_nn_conv c4 = g3d_nn_conv_make(64, 70, 3, 1, 1, w4, NULL);
+        c4.wino_small = 1;
+        CHECK(nn_wino_tile(&c4) == 2);
+        c4.wino_small = 0;
         CHECK(nn_wino_tile(&c4) == 4);
         CHECK_OK(g3d_nn_conv_prepare(&c4));
         CHECK_OK(g3d_nn_conv_forward(&c4, x4, h, w, got[6], NULL));
