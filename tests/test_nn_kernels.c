@@ -211,7 +211,9 @@ TEST(conv_against_reference)
     for (int i = 0; i < n; i++) {
         check_conv(&cases[i], G3D_DT_F32, NULL, 10 + i, 0);
         check_conv(&cases[i], G3D_DT_F32, NULL, 10 + i, 1);
-        check_conv(&cases[i], G3D_DT_F32, NULL, 10 + i, 2);
+        const conv_case *cc = &cases[i];
+        if (cc->k == 3 && cc->s == 1 && cc->d == 1 && cc->g == 1 && !cc->tr && cc->cin >= 64 && cc->cout >= 64)
+            check_conv(cc, G3D_DT_F32, NULL, 10 + i, 2); /* F(4x4) layers kept to F(2x2) */
     }
     /* epilogues, 16-bit weights */
     for (int i = 0; i < n; i++) {
