@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/resource.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 static inline double cpu_seconds(void)
@@ -102,6 +103,14 @@ static inline int twin_round(FILE *to, FILE *from, double *wall, double *cpu)
     fprintf(to, "go\n");
     fflush(to);
     return !fgets(line, sizeof line, from) || sscanf(line, "torch_seconds %lf %lf", wall, cpu) != 2;
+}
+
+/* Ends the twin: closes its pipes (its loop over stdin ends) and waits for it. */
+static inline void twin_stop(FILE *to, FILE *from, pid_t pid)
+{
+    fclose(to);
+    fclose(from);
+    waitpid(pid, NULL, 0);
 }
 
 #endif

@@ -8,7 +8,8 @@
 #   --slurm:        also Slurm and munge, for the test that runs `gen3d batch --slurm` on a
 #                   one-node cluster it starts itself (tests/test_batch_slurm.sh); CI uses it
 # The fixture generators (tests/fixtures/make_*.py, not run by the tests) use Debian's
-# python3-torch, python3-numpy, and for CLIP python3-regex and python3-wcwidth.
+# python3-torch, python3-numpy, for CLIP python3-regex and python3-wcwidth, for MoGe (its
+# golden generator and bench/bench_moge_torch.py) python3-scipy.
 set -eu
 
 PKGS="build-essential cmake pkg-config libstb-dev libjpeg62-turbo-dev libopenblas-dev libcjson-dev zlib1g-dev libfftw3-dev ffmpeg"

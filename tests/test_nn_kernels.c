@@ -123,7 +123,8 @@ typedef struct conv_case {
     g3d_nn_padmode mode;
 } conv_case;
 
-/* prepare: run through g3d_nn_conv_prepare (Winograd for 3x3 stride 1, phases for transposed) */
+/* prepare: run through g3d_nn_conv_prepare (Winograd for 3x3 stride 1, phases for transposed);
+ * 2: with wino_small (F(2x2) also where F(4x4) would be chosen) */
 static void check_conv(const conv_case *cc, g3d_dtype wt, const g3d_nn_epi *epi, uint64_t seed, int prepare)
 {
     const size_t nw = (size_t)cc->cout * (cc->cin / (cc->g ? cc->g : 1)) * cc->k * cc->k;
@@ -131,6 +132,7 @@ static void check_conv(const conv_case *cc, g3d_dtype wt, const g3d_nn_epi *epi,
     uint16_t *w16 = NULL;
     g3d_nn_conv c = g3d_nn_conv_make(cc->cin, cc->cout, cc->k, cc->s, cc->p, w, b);
     c.dilation = cc->d, c.groups = cc->g, c.pad_mode = cc->mode, c.transposed = cc->tr, c.output_padding = cc->op;
+    c.wino_small = prepare == 2;
     if (wt != G3D_DT_F32) {
         /* weights as 16-bit values: the reference reads them the same way */
         w16 = malloc(sizeof(uint16_t) * nw);
@@ -209,6 +211,9 @@ TEST(conv_against_reference)
     for (int i = 0; i < n; i++) {
         check_conv(&cases[i], G3D_DT_F32, NULL, 10 + i, 0);
         check_conv(&cases[i], G3D_DT_F32, NULL, 10 + i, 1);
+        const conv_case *cc = &cases[i];
+        if (cc->k == 3 && cc->s == 1 && cc->d == 1 && cc->g == 1 && !cc->tr && cc->cin >= 64 && cc->cout >= 64)
+            check_conv(cc, G3D_DT_F32, NULL, 10 + i, 2); /* F(4x4) layers kept to F(2x2) */
     }
     /* epilogues, 16-bit weights */
     for (int i = 0; i < n; i++) {
@@ -242,6 +247,23 @@ TEST(conv_bad_configurations)
     CHECK_FAILS(g3d_nn_conv_forward(&c, x, 3, 3, y, NULL));
     c = g3d_nn_conv_make(1, 1, 5, 1, 1, w, NULL);
     CHECK_FAILS(g3d_nn_conv_forward(&c, x, 2, 2, y, NULL));
+}
+
+TEST(transpose_tile_against_reference)
+{
+    /* attention's query (w > nr: zero rows) and output (per-row scale, partial 16-blocks) tiles */
+    float *src = rnd(70 * 90, 31, 1), *rs = rnd(90, 32, 1), *d = malloc(sizeof(float) * 90 * 80),
+          *r = malloc(sizeof(float) * 90 * 80);
+    const int shapes[][3] = {{64, 40, 64}, {13, 40, 16}, {40, 64, 40}, {7, 9, 7}, {64, 64, 64}, {1, 1, 16}, {40, 23, 48}};
+    for (size_t s = 0; s < sizeof shapes / sizeof *shapes; s++)
+        for (int scaled = 0; scaled < 2; scaled++) {
+            const int nr = shapes[s][0], nc = shapes[s][1], w = shapes[s][2];
+            for (int i = 0; i < 90 * 80; i++) d[i] = r[i] = -7.0f;
+            nn_transpose_tile(src + 3, 90, nr, nc, d, 80, w, 0.3f, scaled ? rs : NULL);
+            nn_ref_transpose_tile(src + 3, 90, nr, nc, r, 80, w, 0.3f, scaled ? rs : NULL);
+            CHECK_MSG(!memcmp(d, r, sizeof(float) * 90 * 80), "transpose %d x %d -> w %d differs", nr, nc, w);
+        }
+    free(src), free(rs), free(d), free(r);
 }
 
 static void check_attention(g3d_nn_attn a, uint64_t seed, const char *what)
@@ -401,6 +423,9 @@ TEST(independent_of_thread_count)
         g3d_nn_conv_release(&c);
         got[6] = malloc(sizeof(float) * 70 * h * w);
         g3d_nn_conv c4 = g3d_nn_conv_make(64, 70, 3, 1, 1, w4, NULL);
+        c4.wino_small = 1;
+        CHECK(nn_wino_tile(&c4) == 2);
+        c4.wino_small = 0;
         CHECK(nn_wino_tile(&c4) == 4);
         CHECK_OK(g3d_nn_conv_prepare(&c4));
         CHECK_OK(g3d_nn_conv_forward(&c4, x4, h, w, got[6], NULL));
@@ -460,6 +485,7 @@ int main(void)
     find_isas();
     printf("kernels: %s (testing %d instruction sets)\n", g3d_nn_isa_name(), nisa);
     RUN(matmul_shapes_and_transposes);
+    RUN(transpose_tile_against_reference);
     RUN(linear_epilogues_and_16bit_weights);
     RUN(conv_against_reference);
     RUN(conv_bad_configurations);

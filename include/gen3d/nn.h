@@ -137,6 +137,7 @@ typedef struct g3d_nn_conv {
     const void *w;           /* weights in the layout of the header comment */
     g3d_dtype wtype;         /* G3D_DT_F32 (0), G3D_DT_F16 or G3D_DT_BF16 */
     const float *b;          /* [cout] or NULL */
+    int wino_small;          /* 1: g3d_nn_conv_prepare keeps to F(2x2, 3x3) (a quarter of the memory) */
     void *prep;              /* owned by g3d_nn_conv_prepare; NULL otherwise */
 } g3d_nn_conv;
 
@@ -156,7 +157,8 @@ g3d_status g3d_nn_conv_forward(const g3d_nn_conv *c, const float *x, int h, int 
  *    switches to Winograd: F(2x2, 3x3), about 1.5x faster, within a few float roundings of the
  *    direct sum, transformed kernels (float32) 16/9 the size of float32 weights; with at least
  *    64 channels on both sides F(4x4, 3x3), about 2x faster (slower on maps under ~32x32),
- *    about 20x the rounding error of F(2x2), transformed kernels 4x the float32 weights;
+ *    about 20x the rounding error of F(2x2), transformed kernels 4x the float32 weights
+ *    (unless wino_small is set before preparing);
  *  - a ConvTranspose2d keeps its per-phase kernels (otherwise rebuilt on every call);
  *  - anything else: nothing to do (G3D_OK).
  * Undo with g3d_nn_conv_release before freeing the weights or changing the layer. */

@@ -36,11 +36,18 @@ static g3d_status load_conv(const loader *l, conv *c, int transpose, int cout, i
     snprintf(name, sizeof name, "%s.weight", base);
     G3D_TRY(g3d_ckpt_read_alloc(l->ck, name, 4, ws, &c->w));
     snprintf(name, sizeof name, "%s.bias", base);
-    return g3d_ckpt_read_alloc(l->ck, name, 1, bs, &c->b);
+    G3D_TRY(g3d_ckpt_read_alloc(l->ck, name, 1, bs, &c->b));
+    /* the official convolutions: 3x3 with replicate padding, 1x1, and 2x2 stride-2 transposed;
+     * preparing gives the 3x3 ones Winograd and the transposed one its phase kernels */
+    c->nc = g3d_nn_conv_make(cin, cout, k, transpose ? k : 1, k == 3, c->w, c->b);
+    c->nc.transposed = transpose;
+    if (k == 3) c->nc.pad_mode = G3D_PAD_REPLICATE;
+    return g3d_nn_conv_prepare(&c->nc);
 }
 
 static void free_conv(conv *c)
 {
+    g3d_nn_conv_release(&c->nc);
     free(c->w);
     free(c->b);
     c->w = c->b = NULL;

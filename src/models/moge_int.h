@@ -5,6 +5,7 @@
 
 #include "gen3d/dinov2.h"
 #include "gen3d/moge.h"
+#include "gen3d/nn.h"
 
 #define PATCH 14
 #define MAX_LEVELS 8
@@ -14,6 +15,7 @@
 typedef struct conv {
     float *w, *b;   /* w [cout, cin, k, k] (ConvTranspose: [cin, cout, k, k]) */
     int cin, cout, k;
+    g3d_nn_conv nc; /* the layer over w and b, prepared at load (3x3: replicate padding) */
 } conv;
 
 typedef enum resampler { RS_CONV_TRANSPOSE, RS_BILINEAR, RS_NEAREST } resampler;

@@ -17,25 +17,9 @@ static float *alloc_f(size_t n) { return malloc(sizeof(float) * (n ? n : 1)); }
 
 #define NOMEM() G3D_ERR(G3D_ERR_NOMEM, "MoGe: out of memory")
 
-/* x [c, h, w] -> y [c, h+2, w+2] with the border pixels repeated (padding_mode='replicate'). */
-static void pad_replicate(const float *x, int c, int h, int w, float *y)
-{
-    int W = w + 2;
-#pragma omp parallel for schedule(static)
-    for (int ch = 0; ch < c; ch++)
-        for (int r = 0; r < h + 2; r++) {
-            int sr = r == 0 ? 0 : r > h ? h - 1 : r - 1;
-            const float *src = x + ((size_t)ch * h + sr) * w;
-            float *dst = y + ((size_t)ch * (h + 2) + r) * W;
-            dst[0] = src[0];
-            memcpy(dst + 1, src, sizeof(float) * (size_t)w);
-            dst[w + 1] = src[w - 1];
-        }
-}
-
 /* Work buffers reused through one forward pass: the full-resolution levels need tens of MB
  * per temporary, and fresh allocations of that size are new pages (faults, zeroing) every time. */
-enum { SC_PAD, SC_A, SC_B, SC_R, SC_T, SC_COUNT };
+enum { SC_A, SC_B, SC_T, SC_COUNT };
 typedef struct scratch {
     float *buf[SC_COUNT];
     size_t cap[SC_COUNT];
@@ -56,34 +40,23 @@ static void scratch_free(scratch *sc)
     for (int i = 0; i < SC_COUNT; i++) free(sc->buf[i]);
 }
 
-/* 3x3 convolution with replicate padding; y must not alias x. */
-static g3d_status conv3_rep(const conv *c, const float *x, int h, int w, float *y, scratch *sc)
+/* y = conv(x) (3x3 with replicate padding, or 1x1), then the epilogue; y must not alias x. */
+static g3d_status conv_fwd(const conv *c, const float *x, int h, int w, float *y, const g3d_nn_epi *epi)
 {
-    float *p = scratch_get(sc, SC_PAD, (size_t)c->cin * (h + 2) * (w + 2));
-    if (!p) return NOMEM();
-    pad_replicate(x, c->cin, h, w, p);
-    return g3d_nn_conv2d(p, c->cin, h + 2, w + 2, c->w, c->b, c->cout, 3, 1, 0, y);
+    return g3d_nn_conv_forward(&c->nc, x, h, w, y, epi);
 }
 
-static g3d_status conv1(const conv *c, const float *x, int h, int w, float *y)
-{
-    return g3d_nn_conv2d(x, c->cin, h, w, c->w, c->b, c->cout, 1, 1, 0, y);
-}
-
-/* x += conv(relu(conv(relu(x)))) */
+/* x += conv(relu(conv(relu(x)))): the inner ReLU and the sum ride in the convolutions' epilogues */
 static g3d_status res_block(const conv *c1, const conv *c2, float *x, int h, int w, scratch *sc)
 {
     size_t plane = (size_t)h * w;
     float *a = scratch_get(sc, SC_A, (size_t)c1->cin * plane), *b = scratch_get(sc, SC_B, (size_t)c1->cout * plane);
-    float *r = scratch_get(sc, SC_R, (size_t)c2->cout * plane);
-    if (!a || !b || !r) return NOMEM();
+    if (!a || !b) return NOMEM();
     memcpy(a, x, sizeof(float) * c1->cin * plane);
     g3d_nn_relu(a, (size_t)c1->cin * plane);
-    G3D_TRY(conv3_rep(c1, a, h, w, b, sc));
-    g3d_nn_relu(b, (size_t)c1->cout * plane);
-    G3D_TRY(conv3_rep(c2, b, h, w, r, sc));
-    g3d_nn_add(x, r, (size_t)c2->cout * plane);
-    return G3D_OK;
+    const g3d_nn_epi relu = {.act = G3D_ACT_RELU}, sum = {.res = x};
+    G3D_TRY(conv_fwd(c1, a, h, w, b, &relu));
+    return conv_fwd(c2, b, h, w, x, &sum);
 }
 
 /* Per-plane resize of [c, sh, sw] into [c, dh, dw]. */
@@ -104,7 +77,7 @@ static g3d_status resample(const stack *s, int l, const float *x, int h, int w, 
     g3d_status rc = t && *y ? G3D_OK : NOMEM();
     if (rc == G3D_OK) {
         if (s->rs[l] == RS_CONV_TRANSPOSE) {
-            rc = g3d_nn_conv_transpose2d(x, c, h, w, s->up[l].w, s->up[l].b, s->dim[l + 1], 2, t);
+            rc = conv_fwd(&s->up[l], x, h, w, t, NULL);
         } else if (s->rs[l] == RS_BILINEAR) {
             rc = resize_planes(x, c, h, w, t, 2 * h, 2 * w, G3D_RESIZE_BILINEAR);
         } else {
@@ -114,7 +87,7 @@ static g3d_status resample(const stack *s, int l, const float *x, int h, int w, 
                         t[((size_t)ch * 2 * h + r) * 2 * w + q] = x[((size_t)ch * h + r / 2) * w + q / 2];
         }
     }
-    if (rc == G3D_OK) rc = conv3_rep(&s->upconv[l], t, 2 * h, 2 * w, *y, sc);
+    if (rc == G3D_OK) rc = conv_fwd(&s->upconv[l], t, 2 * h, 2 * w, *y, NULL);
     if (rc != G3D_OK) {
         free(*y);
         *y = NULL;
@@ -139,7 +112,7 @@ static g3d_status stack_forward(const stack *s, float *const *in, int rows, int 
                     rc = NOMEM();
                     break;
                 }
-                rc = conv1(&s->in[l], in[l], h, w, f);
+                rc = conv_fwd(&s->in[l], in[l], h, w, f, NULL);
             }
             if (rc == G3D_OK && !x) {
                 x = f == in[l] ? alloc_f(n) : f;
@@ -156,7 +129,7 @@ static g3d_status stack_forward(const stack *s, float *const *in, int rows, int 
         if (rc == G3D_OK && (all || l == s->nlev - 1)) {
             int oc = stack_out_ch(s, l);
             if (!(outs[l] = alloc_f((size_t)oc * plane))) rc = NOMEM();
-            else if (s->dout[l] > 0) rc = conv1(&s->out[l], x, h, w, outs[l]);
+            else if (s->dout[l] > 0) rc = conv_fwd(&s->out[l], x, h, w, outs[l], NULL);
             else memcpy(outs[l], x, sizeof(float) * n);
         }
         if (rc == G3D_OK && l + 1 < s->nlev) {
@@ -244,7 +217,7 @@ static g3d_status encode(const g3d_moge *m, const float *rgb, int w, int h, int 
     for (int i = 0; i < m->nlayers && rc == G3D_OK; i++) {
         for (int t = 0; t < np; t++)
             for (int c = 0; c < D; c++) tok[(size_t)c * np + t] = feats[i][(size_t)t * D + c];
-        rc = conv1(&m->proj[i], tok, rows, cols, i ? p : feat);
+        rc = conv_fwd(&m->proj[i], tok, rows, cols, i ? p : feat, NULL);
         if (rc == G3D_OK && i) g3d_nn_add(feat, p, (size_t)m->dim_out * np);
     }
     if (rc == G3D_OK) memcpy(cls, clss[m->nlayers - 1], sizeof(float) * D);

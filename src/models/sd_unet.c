@@ -398,13 +398,28 @@ void g3d_sd_controlnet_free(g3d_sd_controlnet *m)
     free(m);
 }
 
-/* A res block, then a transformer when `st`, at <base>.0 and <base>.1. */
-static g3d_status res_st(const sd_ld *ld, const g3d_sd_unet *m, sd_block *b, int cin, int cout, int st, const char *base)
+/* The 3x3 convolutions on the two finest maps (64 x 64 and 32 x 32 latents at 512 x 512)
+ * through Winograd: F(4x4) on the finest, F(2x2) on the next, whose 62 M weights would cost
+ * 1 GB as F(4x4) kernels (0.45 GB as F(2x2)). The coarser maps (16 x 16 and 8 x 8) are too
+ * small for F(4x4) to pay (docs/nn.md) and hold most of the weights. */
+static g3d_status prepare_at(g3d_nn_conv *c, int res_level)
+{
+    if (res_level > 1) return G3D_OK;
+    c->wino_small = res_level == 1;
+    return g3d_nn_conv_prepare(c);
+}
+
+/* A res block, then a transformer when `st`, at <base>.0 and <base>.1; `level` is the
+ * resolution level the block runs at. */
+static g3d_status res_st(const sd_ld *ld, const g3d_sd_unet *m, sd_block *b, int cin, int cout, int st, int level,
+                         const char *base)
 {
     char n[272];
     snprintf(n, sizeof n, "%s.0", base);
     b->has_res = 1;
     G3D_TRY(sd_res_load(ld, &b->res, cin, cout, m->temb_dim, GN_EPS_RES, n));
+    G3D_TRY(prepare_at(&b->res.c1, level));
+    G3D_TRY(prepare_at(&b->res.c2, level));
     b->cout = cout;
     if (st) {
         snprintf(n, sizeof n, "%s.1", base);
@@ -437,7 +452,7 @@ static g3d_status unet_build(g3d_sd_unet *m, const g3d_ckpt *ck)
         for (int r = 0; r < c->nres[l]; r++, i++) {
             snprintf(n, sizeof n, "input_blocks.%d", i);
             m->nin = i + 1;   /* freed with the model even when it fails half-way */
-            G3D_TRY(res_st(&ld, m, &m->in[i], ch, c->mult[l] * C, c->attn[l], n));
+            G3D_TRY(res_st(&ld, m, &m->in[i], ch, c->mult[l] * C, c->attn[l], l, n));
             ch = c->mult[l] * C;
             chans[nch++] = ch;
         }
@@ -482,12 +497,13 @@ static g3d_status unet_build(g3d_sd_unet *m, const g3d_ckpt *ck)
             int ich = chans[--nch];
             snprintf(n, sizeof n, "output_blocks.%d", i);
             m->nout = i + 1;
-            G3D_TRY(res_st(&ld, m, &m->out[i], ch + ich, c->mult[l] * C, c->attn[l], n));
+            G3D_TRY(res_st(&ld, m, &m->out[i], ch + ich, c->mult[l] * C, c->attn[l], l, n));
             ch = c->mult[l] * C;
             if (l && r == c->nres[l]) {
                 snprintf(n, sizeof n, "output_blocks.%d.%d.conv", i, c->attn[l] ? 2 : 1);
                 m->out[i].has_up = 1;
                 G3D_TRY(sd_conv_load(&ld, &m->out[i].resample, ch, ch, 3, 1, n));
+                G3D_TRY(prepare_at(&m->out[i].resample, l - 1)); /* after the upsampling */
             }
         }
     G3D_TRY(sd_vec(&ld, &m->gn_out_g, ch, "out.0", "weight"));

@@ -4,6 +4,7 @@
  * exp(x) = 2^(x log2 e), see vexp2; erf, see vgelu. The reference loops use libm. */
 #include "nn/nn_int.h"
 
+#include <immintrin.h>
 #include <math.h>
 #include <omp.h>
 #include <string.h>
@@ -165,6 +166,92 @@ CLONES void nn_online_softmax(float *s, long lds, int rows, int n, float *m, flo
             *(vfu *)(corr + i) = c;
         }
     }
+}
+
+/* Transposes of attention's query and output tiles: 16 x 16 blocks through four stages of
+ * two-vector shuffles (each swaps the off-diagonal sub-blocks of size 8, 4, 2, 1), so the
+ * scattered scalar stores of a plain loop (which missed the cache on every output row of
+ * short-key attention) become whole-vector ones. */
+INLINE void transpose16(vf t[16])
+{
+    static const vi lo8 = {0, 1, 2, 3, 4, 5, 6, 7, 16, 17, 18, 19, 20, 21, 22, 23},
+                    hi8 = {8, 9, 10, 11, 12, 13, 14, 15, 24, 25, 26, 27, 28, 29, 30, 31},
+                    lo4 = {0, 1, 2, 3, 16, 17, 18, 19, 8, 9, 10, 11, 24, 25, 26, 27},
+                    hi4 = {4, 5, 6, 7, 20, 21, 22, 23, 12, 13, 14, 15, 28, 29, 30, 31},
+                    lo2 = {0, 1, 16, 17, 4, 5, 20, 21, 8, 9, 24, 25, 12, 13, 28, 29},
+                    hi2 = {2, 3, 18, 19, 6, 7, 22, 23, 10, 11, 26, 27, 14, 15, 30, 31},
+                    lo1 = {0, 16, 2, 18, 4, 20, 6, 22, 8, 24, 10, 26, 12, 28, 14, 30},
+                    hi1 = {1, 17, 3, 19, 5, 21, 7, 23, 9, 25, 11, 27, 13, 29, 15, 31};
+#define STAGE(B, LO, HI)                                                                           \
+    for (int r = 0; r < 16; r++)                                                                   \
+        if (!(r & B)) {                                                                            \
+            vf x = t[r], y = t[r + B];                                                             \
+            t[r] = __builtin_shuffle(x, y, LO), t[r + B] = __builtin_shuffle(x, y, HI);            \
+        }
+    STAGE(8, lo8, hi8) STAGE(4, lo4, hi4) STAGE(2, lo2, hi2) STAGE(1, lo1, hi1)
+#undef STAGE
+}
+
+/* Partial blocks (head sizes 40, 80: a third of SD's blocks) use masked loads and stores;
+ * elsewhere they go through a zeroed copy. */
+__attribute__((target("avx512f"))) static void transpose_tile512(const float *src, long lds, int nr, int nc,
+                                                                float *dst, long ldd, int w, float scale,
+                                                                const float *rscale)
+{
+    for (int c0 = 0; c0 < nc; c0 += 16) {
+        const int cn = nc - c0 < 16 ? nc - c0 : 16;
+        for (int r0 = 0; r0 < w; r0 += 16) {
+            const int rn = nr - r0 < 16 ? (nr - r0 > 0 ? nr - r0 : 0) : 16, wn = w - r0 < 16 ? w - r0 : 16;
+            const __mmask16 cm = (__mmask16)((1u << cn) - 1), wm = (__mmask16)((1u << wn) - 1);
+            const float *p = src + (long)r0 * lds + c0;
+            float *q = dst + (long)c0 * ldd + r0;
+            vf t[16];
+            for (int r = 0; r < 16; r++) t[r] = (vf)_mm512_maskz_loadu_ps(r < rn ? cm : 0, r < rn ? p + r * lds : p);
+            transpose16(t);
+            for (int c = 0; c < 16; c++)
+                if (c < cn) _mm512_mask_storeu_ps(q + c * ldd, wm, (__m512)(rscale ? t[c] * rscale[c0 + c] : t[c] * scale));
+        }
+    }
+}
+
+static void transpose_tile(const float *src, long lds, int nr, int nc, float *dst, long ldd, int w, float scale,
+                           const float *rscale)
+{
+    for (int c0 = 0; c0 < nc; c0 += 16) {
+        const int cn = nc - c0 < 16 ? nc - c0 : 16;
+        for (int r0 = 0; r0 < w; r0 += 16) {
+            const int rn = nr - r0 < 16 ? (nr - r0 > 0 ? nr - r0 : 0) : 16, wn = w - r0 < 16 ? w - r0 : 16;
+            const float *p = src + (long)r0 * lds + c0;
+            float *q = dst + (long)c0 * ldd + r0, tmp[16][16] = {{0}};
+            vf t[16];
+            for (int r = 0; r < rn; r++)
+                for (int c = 0; c < cn; c++) tmp[r][c] = p[r * lds + c];
+            for (int r = 0; r < 16; r++) t[r] = *(const vfu *)tmp[r];
+            transpose16(t);
+            for (int c = 0; c < cn; c++) *(vfu *)tmp[c] = rscale ? t[c] * rscale[c0 + c] : t[c] * scale;
+            for (int c = 0; c < cn; c++)
+                for (int r = 0; r < wn; r++) q[c * ldd + r] = tmp[c][r];
+        }
+    }
+}
+
+void nn_transpose_tile(const float *src, long lds, int nr, int nc, float *dst, long ldd, int w, float scale,
+                       const float *rscale)
+{
+    if (nn_isa() == NN_ISA_AVX512)
+        transpose_tile512(src, lds, nr, nc, dst, ldd, w, scale, rscale);
+    else
+        transpose_tile(src, lds, nr, nc, dst, ldd, w, scale, rscale);
+}
+
+void nn_ref_transpose_tile(const float *src, long lds, int nr, int nc, float *dst, long ldd, int w, float scale,
+                           const float *rscale)
+{
+    for (int c = 0; c < nc; c++)
+        for (int r = 0; r < w; r++) {
+            const float x = r < nr ? src[(long)r * lds + c] : 0.0f;
+            dst[(long)c * ldd + r] = rscale ? x * rscale[c] : x * scale;
+        }
 }
 
 float nn_exp_sum(float *x, long n, float m)

@@ -34,10 +34,8 @@ static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0)
     const int nvq = (nqv + 15) / 16, QW = 16 * nvq;
     float *qt = T->qt, *st = T->st, *ot = T->ot, *m = T->m, *l = T->l, *corr = T->t1;
     /* queries of the block, scaled, as columns */
-    for (int d = 0; d < hd; d++)
-        for (int i = 0; i < QW; i++) qt[d * QB + i] = i < nqv ? a->q[(long)(q0 + i) * a->ldq + h * hd + d] * a->scale : 0.0f;
+    nn_transpose_tile(a->q + (long)q0 * a->ldq + h * hd, a->ldq, nqv, hd, qt, QB, QW, a->scale, NULL);
     for (int i = 0; i < QB; i++) m[i] = -INFINITY, l[i] = 0.0f;
-    memset(ot, 0, sizeof(float) * rup6(hdv) * QB);
     /* causal: query q0+i sees keys j <= q0 + i + shift */
     const int shift = a->nk - a->nq;
     int kend = a->nk;
@@ -46,6 +44,9 @@ static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0)
     for (int k0 = 0; k0 < kend; k0 += kbs) {
         const int kb = kend - k0 < kbs ? kend - k0 : kbs;
         for (int r = 0; r < kb; r += NN_MR) {
+            /* a last partial group of keys is redone as the six last keys (the values it writes
+             * twice come out the same) rather than copied */
+            if (kb - r < NN_MR && kb >= NN_MR) r = kb - NN_MR;
             const float *ka = a->k + (long)(k0 + r) * a->ldk + h * hd;
             long lda = a->ldk;
             if (kb - r < NN_MR) {
@@ -63,8 +64,10 @@ static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0)
             }
         /* online softmax: new running maximum, rescale what was accumulated */
         nn_online_softmax(st, QB, kb, QW, m, l, corr);
-        for (int d = 0; d < hdv; d++)
-            for (int i = 0; i < QW; i++) ot[d * QB + i] *= corr[i];
+        /* the first block starts the sums (acc = 0 below) instead of scaling zeros */
+        if (k0)
+            for (int d = 0; d < hdv; d++)
+                for (int i = 0; i < QW; i++) ot[d * QB + i] *= corr[i];
         /* O^T += V^T P^T, six value channels at a time */
         for (int d0 = 0; d0 < hdv; d0 += NN_MR) {
             const float *va = a->v + (long)k0 * a->ldv + h * hdv + d0;
@@ -74,14 +77,12 @@ static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0)
                     for (int j = 0; j < kb; j++) T->edge[i * KB + j] = i < hdv - d0 ? va[i + (long)j * a->ldv] : 0.0f;
                 va = T->edge, lda = KB, ka = 1;
             }
-            nn_kernel(kb, va, lda, ka, st, QB, ot + d0 * QB, QB, nvq, 1);
+            nn_kernel(kb, va, lda, ka, st, QB, ot + d0 * QB, QB, nvq, k0 > 0);
         }
     }
-    for (int i = 0; i < nqv; i++) {
-        float inv = l[i] > 0.0f ? 1.0f / l[i] : 0.0f;
-        float *o = a->out + (long)(q0 + i) * a->ldo + h * hdv;
-        for (int d = 0; d < hdv; d++) o[d] = ot[d * QB + i] * inv;
-    }
+    if (kend <= 0) memset(ot, 0, sizeof(float) * (size_t)hdv * QB);
+    for (int i = 0; i < nqv; i++) corr[i] = l[i] > 0.0f ? 1.0f / l[i] : 0.0f;
+    nn_transpose_tile(ot, QB, hdv, nqv, a->out + (long)q0 * a->ldo + h * hdv, a->ldo, hdv, 1.0f, corr);
 }
 
 /* The descriptor with its defaults filled in, or an error. */

@@ -98,6 +98,11 @@ void nn_exp_rows(float *s, long lds, int rows, const float *m, float *sum, int n
  * corr[i] = exp(m_old - m_new) is the factor for what was accumulated before. */
 void nn_online_softmax(float *s, long lds, int rows, int n, float *m, float *l, float *corr);
 
+/* dst[c*ldd + r] = src[r*lds + c] * (rscale ? rscale[c] : scale) for c < nc, r < w, where
+ * rows r >= nr of src read as 0 (w >= nr; only rows < nr and columns < nc of src are read). */
+void nn_transpose_tile(const float *src, long lds, int nr, int nc, float *dst, long ldd, int w, float scale,
+                       const float *rscale);
+
 /* ---- reference loops (each beside its tuned operator) ---------------------------------- */
 float nn_ref_act1(g3d_act act, float x);
 void nn_ref_matmul(int ta, int tb, int M, int N, int K, float alpha, const float *A, int lda, const float *B, int ldb,
@@ -106,6 +111,8 @@ void nn_ref_linear(const float *x, int n, int in, const float *w, const float *b
                    float *y);
 g3d_status nn_ref_conv(const g3d_nn_conv *c, const float *x, int h, int w, const g3d_nn_epi *epi, float *y);
 void nn_ref_attend(const g3d_nn_attn *a);
+void nn_ref_transpose_tile(const float *src, long lds, int nr, int nc, float *dst, long ldd, int w, float scale,
+                           const float *rscale);
 void nn_ref_layernorm(const float *x, int n, int c, const float *g, const float *b, float eps, float *y);
 void nn_ref_groupnorm(const float *x, int c, int hw, int groups, const float *g, const float *b, float eps, g3d_act act,
                       float *y);

@@ -43,10 +43,11 @@ int nn_wino_eligible(const g3d_nn_conv *c)
 }
 
 /* F(4x4) where every transformed product keeps enough work to amortise its larger input
- * transform (36 panels instead of 16): enough channels on both sides. */
+ * transform (36 panels instead of 16): enough channels on both sides, unless the caller has
+ * asked for F(2x2)'s smaller kernels. */
 int nn_wino_tile(const g3d_nn_conv *c)
 {
-    return c->cin >= WINO4_MIN_CH && c->cout >= WINO4_MIN_CH ? 4 : 2;
+    return !c->wino_small && c->cin >= WINO4_MIN_CH && c->cout >= WINO4_MIN_CH ? 4 : 2;
 }
 
 /* G for F(2x2, 3x3) (points 0, 1, -1, inf) and F(4x4, 3x3) (0, 1, -1, 2, -2, inf) */
