@@ -43,6 +43,7 @@
 #include "gen3d/depth_estimators.h"
 #include "gen3d/explore.h"
 #include "gen3d/frame.h"
+#include "gen3d/init.h"
 #include "gen3d/layers.h"
 #include "gen3d/providers.h"
 #include "gen3d/render.h"
@@ -103,6 +104,11 @@ typedef struct g3d_generate_params {
                                          they cost held-out fidelity, docs/explore.md) */
     /* ---- splats ---- */
     int sh_degree;                    /* 0..3 (3) */
+    int knn_init;                     /* 1: Gaussians start as the Inria recipe (isotropic, 3-NN
+                                         scale, opacity 0.1; init.h); 0 (default): as the pixel
+                                         footprints of the world's points (`footprint`), where
+                                         the cloud keeps them (not a world read from a folder) */
+    g3d_footprint_init footprint;     /* g3d_footprint_init_default */
     g3d_train_params train;           /* g3d_train_params_default(&p.train, 3000); its seed is
                                          replaced by `seed` */
     /* ---- outputs ---- */

@@ -41,6 +41,7 @@ void g3d_generate_params_default(g3d_generate_params *p)
     g3d_trajectory_params_default(&p->trajectory_params);
     g3d_world_params_default(&p->world);
     p->sh_degree = 3;
+    g3d_footprint_init_default(&p->footprint);
     g3d_train_params_default(&p->train, 3000);
     p->last_stage = G3D_STAGE_OUTPUTS;
     p->video = 1;
@@ -350,6 +351,14 @@ static g3d_status train_views(const g3d_world *w, g3d_train_view **out, int *n)
     return G3D_OK;
 }
 
+/* A generated world's points keep their pixel footprints; a world read from a folder has none. */
+static int cloud_has_footprints(const g3d_cloud *c)
+{
+    for (int64_t i = 0; i < c->n; i++)
+        if (!(c->size[i] > 0)) return 0;
+    return 1;
+}
+
 static g3d_status stage_splats(run *r)
 {
     const g3d_generate_params *p = r->p;
@@ -358,7 +367,10 @@ static g3d_status stage_splats(run *r)
     int nviews = 0;
     G3D_TRY(train_views(w, &views, &nviews));
     g3d_status rc;
-    if (w->cloud.n > 0) {
+    if (w->cloud.n > 0 && !p->knn_init && cloud_has_footprints(&w->cloud)) {
+        rc = g3d_gaussians_init_from_footprints(&r->scene, w->cloud.xyz, w->cloud.rgb, w->cloud.span, w->cloud.n,
+                                                p->sh_degree, &p->footprint);
+    } else if (w->cloud.n > 0) {
         rc = g3d_gaussians_init_from_points(&r->scene, w->cloud.xyz, w->cloud.rgb, w->cloud.n, p->sh_degree);
     } else {
         g3d_log(G3D_LOG_WARN, "no point cloud: starting from %d random points", G3D_RANDOM_INIT_POINTS);
@@ -549,6 +561,7 @@ static cJSON *config_json(const run *r)
     cJSON_AddNumberToObject(c, "explore_angle", p->explore.angle_deg);
     cJSON_AddNumberToObject(c, "iterations", (double)p->train.iterations);
     cJSON_AddNumberToObject(c, "sh_degree", p->sh_degree);
+    cJSON_AddStringToObject(c, "init", p->knn_init ? "knn" : "footprint");
     cJSON_AddStringToObject(c, "video_trajectory", p->video_trajectory);
     cJSON_AddNumberToObject(c, "video_frames", p->video_frames);
     cJSON_AddNumberToObject(c, "fps", p->video_params.fps);

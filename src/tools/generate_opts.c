@@ -27,6 +27,7 @@ int g3d_cli_generate_opts(g3d_cli_generate *g, g3d_opt *out)
         {0, "world", G3D_OPT_PATH, &p->world_dir, "DIR", "train on this world folder instead of generating one"},
         {0, "iters", G3D_OPT_INT, &g->iters, "N", "training iterations"},
         {0, "sh-degree", G3D_OPT_INT, &p->sh_degree, "D", "spherical-harmonics degree of the Gaussians (0..3)"},
+        {0, "knn-init", G3D_OPT_FLAG, &p->knn_init, NULL, "start the Gaussians isotropic (3-NN scale, opacity 0.1), not as pixel footprints"},
         {0, "video-trajectory", G3D_OPT_STRING, &p->video_trajectory, "NAME", "video camera path: swing (a loop around the input view) or a preset below"},
         {0, "frames", G3D_OPT_INT, &p->video_frames, "N", "video frames"},
         {0, "fps", G3D_OPT_INT, &p->video_params.fps, "N", "video frame rate"},
