@@ -12,6 +12,6 @@ cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build build -j "$(nproc)"
 mkdir -p out
 ./build/gen3d generate --default-input "$input" --trajectory rotate --steps 6 --angle 24 --extra 12 \
-    --max-side 384 --iters 1500 -o out/default-scene
+    --max-side 512 --iters 400 -o out/default-scene
 ./build/gen3d info out/default-scene/scene.ply
 echo "result: out/default-scene (viewer.html opens in a web browser; scene.ply in any 3DGS viewer; video.mp4 is the fly-through)"

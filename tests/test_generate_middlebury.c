@@ -1,8 +1,11 @@
 /* test_generate_middlebury.c - `gen3d generate` end to end on the default input (Middlebury
- * 2014 Motorcycle, left view + ground-truth depth), judged where ground truth exists: the
- * trained scene rendered at the real right camera, against the real right image, on the pixels
- * the left view also sees. The floor below is our regression bound: the figure reached when it
- * was set, less a margin for thread-count and platform differences. */
+ * 2014 Motorcycle, left view + ground-truth depth) at its full 741x500, judged where ground
+ * truth exists: the trained scene rendered at the real right camera, against the real right
+ * image, on the pixels the left view also sees. The floor below is our regression bound: the
+ * figure reached when it was set, less a margin for thread-count and platform differences; it
+ * is above what a nearest-neighbour forward warp of the left image with the ground-truth depth
+ * scores on the same pixels (26.94 dB). A short schedule (150 iterations) keeps the test near a
+ * minute on two cores; the default 1000 iterations score a little higher (docs/splatting.md). */
 #include "gen3d/eval.h"
 #include "gen3d/frame.h"
 #include "gen3d/loss.h"
@@ -14,8 +17,8 @@
 #include <stdlib.h>
 #include <sys/wait.h>
 
-#define MAX_SIDE 256
-#define PSNR_FLOOR 25.0  /* 27.1 dB when set */
+#define MAX_SIDE 768     /* the default, so the frame keeps its 741x500 */
+#define PSNR_FLOOR 27.5  /* 28.83 dB when set */
 
 /* PSNR on the co-visible pixels of eval.json's first view, for `method` (NAN if absent). */
 static double eval_json_psnr(const char *path, const char *method)
@@ -41,7 +44,7 @@ TEST(generate_at_the_real_right_view)
     if (!gen3d) return;
     char cmd[16384];
     snprintf(cmd, sizeof cmd,
-             "'%s' generate --default-input '%s' --max-side %d --steps 4 --extra 4 --iters 400 --sh-degree 1 "
+             "'%s' generate --default-input '%s' --max-side %d --steps 4 --extra 4 --iters 150 --sh-degree 1 "
              "--no-video -t 2 -q -o '%s' > '%s.log' 2>&1", gen3d, mb, MAX_SIDE, out, out);
     int st = system(cmd);
     CHECK(st != -1 && WIFEXITED(st) && WEXITSTATUS(st) == 0);

@@ -172,6 +172,29 @@ TEST(fits_and_is_deterministic)
     g3d_gaussians_free(&g2);
 }
 
+static int same_model(const g3d_gaussians *a, const g3d_gaussians *b)
+{
+    return a->n == b->n && memcmp(a->means, b->means, (size_t)a->n * 3 * sizeof(float)) == 0 &&
+           memcmp(a->log_scales, b->log_scales, (size_t)a->n * 3 * sizeof(float)) == 0 &&
+           memcmp(a->sh, b->sh, (size_t)a->n * 3 * sizeof(float)) == 0 &&
+           memcmp(a->opacity_logits, b->opacity_logits, (size_t)a->n * sizeof(float)) == 0;
+}
+
+/* Trains `whole` with a checkpoint every `every` iterations, then `resumed` from the last one. */
+static void run_and_resume(g3d_gaussians *whole, g3d_gaussians *resumed, const g3d_train_view *views, g3d_train_params p,
+                           const char *name, int64_t every)
+{
+    const char *ckpt = test_tmp(name);
+    remove(ckpt);
+    p.checkpoint_path = ckpt;
+    p.checkpoint_every = every;
+    CHECK_OK(g3d_train(whole, views, NTRAIN, &p, NULL));
+    p.checkpoint_path = NULL;
+    p.resume_path = ckpt;
+    memset(resumed, 0, sizeof *resumed);
+    CHECK_OK(g3d_train(resumed, views, NTRAIN, &p, NULL));
+}
+
 /* Coarse to fine: the first iterations see every view at half size; a run resumed from a
  * checkpoint taken in the coarse part crosses into the fine part exactly as the whole run. */
 TEST(coarse_to_fine)
@@ -188,20 +211,10 @@ TEST(coarse_to_fine)
     p.coarse_until = 0;
     CHECK_OK(g3d_train(&fine, views, NTRAIN, &p, NULL));
     p.coarse_until = 100;
-    const char *ckpt = test_tmp("coarse.ckpt.safetensors");
-    remove(ckpt);
-    p.checkpoint_path = ckpt;
-    p.checkpoint_every = 60;
-    CHECK_OK(g3d_train(&a, views, NTRAIN, &p, NULL));
-    p.checkpoint_path = NULL;
-    p.resume_path = ckpt;
-    memset(&b, 0, sizeof b);
-    CHECK_OK(g3d_train(&b, views, NTRAIN, &p, NULL));
-    CHECK(a.n == b.n && memcmp(a.means, b.means, (size_t)a.n * 3 * sizeof(float)) == 0 &&
-          memcmp(a.sh, b.sh, (size_t)a.n * 3 * sizeof(float)) == 0 &&
-          memcmp(a.opacity_logits, b.opacity_logits, (size_t)a.n * sizeof(float)) == 0);
+    run_and_resume(&a, &b, views, p, "coarse.ckpt.safetensors", 60);
+    CHECK(same_model(&a, &b));
     /* the coarse part did train on other images than the plain run */
-    CHECK(a.n != fine.n || memcmp(a.means, fine.means, (size_t)a.n * 3 * sizeof(float)) != 0);
+    CHECK(!same_model(&a, &fine));
     /* and the model still fits a held-out view */
     g3d_camera c = ring_camera(0.3, 0.5);
     g3d_image want, got;
@@ -220,9 +233,47 @@ TEST(coarse_to_fine)
     g3d_gaussians_free(&fine);
 }
 
+/* The first view on its own beat: with a beat of 1 training sees only the first view, exactly
+ * as a run on that view alone; with a beat of 3 a run resumed from a checkpoint ends where the
+ * whole run does, and differs from the run without the beat. */
+TEST(first_view_beat)
+{
+    g3d_gaussians gt, a, b, c;
+    gt_scene(&gt);
+    g3d_image imgs[NTRAIN];
+    g3d_train_view views[NTRAIN];
+    ring_views(&gt, imgs, views);
+    g3d_train_params p;
+    g3d_train_params_default(&p, 90);
+    p.extent = 4.0;
+    init_model(&gt, &a);
+    init_model(&gt, &b);
+    p.first_view_every = 1;
+    CHECK_OK(g3d_train(&a, views, NTRAIN, &p, NULL));
+    p.first_view_every = 0;
+    CHECK_OK(g3d_train(&b, views, 1, &p, NULL));
+    CHECK(same_model(&a, &b));
+    g3d_gaussians_free(&a);
+    g3d_gaussians_free(&b);
+
+    init_model(&gt, &a);
+    init_model(&gt, &c);
+    CHECK_OK(g3d_train(&c, views, NTRAIN, &p, NULL));
+    p.first_view_every = 3;
+    run_and_resume(&a, &b, views, p, "beat.ckpt.safetensors", 40);
+    CHECK(same_model(&a, &b));
+    CHECK(!same_model(&a, &c));
+    for (int i = 0; i < NTRAIN; i++) g3d_image_free(&imgs[i]);
+    g3d_gaussians_free(&gt);
+    g3d_gaussians_free(&a);
+    g3d_gaussians_free(&b);
+    g3d_gaussians_free(&c);
+}
+
 int main(void)
 {
     RUN(fits_and_is_deterministic);
     RUN(coarse_to_fine);
+    RUN(first_view_beat);
     return test_summary();
 }

@@ -14,7 +14,7 @@
  *     g3d_generate_params_default(&p);
  *     p.input.rgb_path = "room.png";                 // or p.frame = &my_frame
  *     p.input.depth_path = "room_depth.png";         // or p.depth_model = "moge2.pt"
- *     g3d_train_params_default(&p.train, 1000);      // a shorter schedule
+ *     g3d_train_params_default(&p.train, 200);       // a shorter schedule
  *     p.output_dir = "scene";
  *     g3d_generate_result r;
  *     if (g3d_generate(&p, &r) != G3D_OK) fprintf(stderr, "%s\n", g3d_error_message());
@@ -53,6 +53,7 @@
 #include "gen3d/depth_estimators.h"
 #include "gen3d/explore.h"
 #include "gen3d/frame.h"
+#include "gen3d/init.h"
 #include "gen3d/layers.h"
 #include "gen3d/providers.h"
 #include "gen3d/render.h"
@@ -85,7 +86,8 @@ const char *g3d_stage_name(g3d_stage s);
 
 typedef struct g3d_generate_params {
     /* ---- input ---- */
-    g3d_frame_params input;           /* where the frame comes from; max_side 512 */
+    g3d_frame_params input;           /* where the frame comes from; max_side 768 (the default
+                                         input at its full 741 x 500) */
     const g3d_frame *frame;           /* a frame already in memory instead, used as it is
                                          (borrowed; `input` is then ignored) */
     const char *world_dir;            /* start from a saved world folder (g3d_world_load; any
@@ -144,7 +146,16 @@ typedef struct g3d_generate_params {
                                          they cost held-out fidelity, docs/explore.md) */
     /* ---- splats ---- */
     int sh_degree;                    /* 0..3 (3) */
-    g3d_train_params train;           /* g3d_train_params_default(&p.train, 3000); its seed is
+    int knn_init;                     /* 1: Gaussians start as the Inria recipe (isotropic, 3-NN
+                                         scale, opacity 0.1; init.h); 0 (default): as the pixel
+                                         footprints of the world's points (`footprint`), where
+                                         the cloud keeps them (not a world read from a folder) */
+    g3d_footprint_init footprint;     /* g3d_footprint_init_default */
+    int input_every;                  /* > 0: the input view is trained every this many
+                                         iterations besides its turn among the views (4: the only
+                                         view of real pixels, against dozens of re-rendered and
+                                         inpainted ones on a long path); 0: its turn only */
+    g3d_train_params train;           /* g3d_train_params_default(&p.train, 500); its seed is
                                          replaced by `seed` */
     /* ---- outputs ---- */
     const char *output_dir;           /* NULL: no files (the result still holds the scene) */

@@ -22,6 +22,27 @@ extern "C" {
 g3d_status g3d_gaussians_init_from_points(g3d_gaussians *g, const float *xyz, const float *rgb,
                                           int64_t n, int sh_degree);
 
+/* The shape of Gaussians started from pixel footprints (g3d_gaussians_init_from_footprints). */
+typedef struct g3d_footprint_init {
+    double scale;    /* in-plane standard deviation per footprint step (0.5: neighbours at one
+                        pixel's spacing overlap like a pixel grid, not a blur) */
+    double thin;     /* extent along the surface normal, relative to the smaller in-plane one (0.2) */
+    double opacity;  /* starting opacity (0.5) */
+} g3d_footprint_init;
+/* Fills the defaults above. */
+void g3d_footprint_init_default(g3d_footprint_init *p);
+
+/* Initial Gaussians from a lifted point cloud whose points keep their pixel footprints
+ * (cloud.h: span (n, 6), the world steps to the next pixel right and down): each Gaussian is a
+ * flat ellipse on the surface, its covariance scale^2 (sx sx^T + sy sy^T) in the plane of the
+ * steps and thin x the smaller axis along the normal, so that at the input's resolution the
+ * Gaussians tile the image like its pixels and, seen from another camera, foreshorten like the
+ * surface. Colour as g3d_gaussians_init_from_points, opacity p->opacity. `g` is created here.
+ * Errors: G3D_ERR_ARG (n < 1, non-finite input, a zero footprint, parameters out of range),
+ * G3D_ERR_NOMEM. */
+g3d_status g3d_gaussians_init_from_footprints(g3d_gaussians *g, const float *xyz, const float *rgb, const float *span,
+                                              int64_t n, int sh_degree, const g3d_footprint_init *p);
+
 /* How many random points a dataset without a cloud starts from (nerfstudio's splatfacto). */
 #define G3D_RANDOM_INIT_POINTS 50000
 

@@ -34,6 +34,9 @@ typedef struct g3d_train_params {
     int densify;                /* 1 = adaptive density control on */
     int visible_adam;           /* 1 = Adam steps only the Gaussians the view sees (adam.h); 0:
                                    it saves little and cost 0.3 dB at the real held-out view */
+    int64_t first_view_every;   /* > 0: every this many iterations train on views[0] (in
+                                   g3d_generate the input, the only view that is all real
+                                   pixels), besides its turn in the permutation; 0 = off */
     int64_t coarse_until;       /* iterations 1..coarse_until see every view downscaled by
                                    coarse_factor (area filter; coarse to fine); 0 = off */
     int coarse_factor;          /* 2 */

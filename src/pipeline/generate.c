@@ -33,7 +33,7 @@ void g3d_generate_params_default(g3d_generate_params *p)
 {
     memset(p, 0, sizeof *p);
     g3d_frame_params_default(&p->input);
-    p->input.max_side = 512;
+    p->input.max_side = 768;
     g3d_depth_model_params_default(&p->depth_model_params);
     p->layers = 1;
     g3d_layers_params_default(&p->layers_params);
@@ -41,7 +41,9 @@ void g3d_generate_params_default(g3d_generate_params *p)
     g3d_trajectory_params_default(&p->trajectory_params);
     g3d_world_params_default(&p->world);
     p->sh_degree = 3;
-    g3d_train_params_default(&p->train, 3000);
+    g3d_footprint_init_default(&p->footprint);
+    p->input_every = 4;
+    g3d_train_params_default(&p->train, 500);
     p->last_stage = G3D_STAGE_OUTPUTS;
     p->video = 1;
     p->video_trajectory = "swing";
@@ -130,6 +132,7 @@ static g3d_status check_params(const g3d_generate_params *p)
     if (p->last_stage != G3D_STAGE_OUTPUTS && !p->output_dir)
         return G3D_ERR(G3D_ERR_ARG, "generate: stopping after the %s writes its folder: give an output folder",
                        g3d_stage_name(p->last_stage));
+    if (p->input_every < 0) return G3D_ERR(G3D_ERR_ARG, "generate: input view every %d iterations (need >= 0)", p->input_every);
     if (p->sh_degree < 0 || p->sh_degree > G3D_SH_MAX_DEGREE)
         return G3D_ERR(G3D_ERR_ARG, "generate: SH degree %d is not in 0..%d", p->sh_degree, G3D_SH_MAX_DEGREE);
     if (p->steps < 0 || p->steps > 10000) return G3D_ERR(G3D_ERR_ARG, "generate: %d steps (need 0..10000)", p->steps);
@@ -497,6 +500,14 @@ static g3d_status train_views(const g3d_world *w, g3d_train_view **out, int *n)
     return G3D_OK;
 }
 
+/* A generated world's points keep their pixel footprints; a world read from a folder has none. */
+static int cloud_has_footprints(const g3d_cloud *c)
+{
+    for (int64_t i = 0; i < c->n; i++)
+        if (!(c->size[i] > 0)) return 0;
+    return 1;
+}
+
 static g3d_status stage_splats(run *r)
 {
     const g3d_generate_params *p = r->p;
@@ -505,7 +516,10 @@ static g3d_status stage_splats(run *r)
     int nviews = 0;
     G3D_TRY(train_views(w, &views, &nviews));
     g3d_status rc;
-    if (w->cloud.n > 0) {
+    if (w->cloud.n > 0 && !p->knn_init && cloud_has_footprints(&w->cloud)) {
+        rc = g3d_gaussians_init_from_footprints(&r->scene, w->cloud.xyz, w->cloud.rgb, w->cloud.span, w->cloud.n,
+                                                p->sh_degree, &p->footprint);
+    } else if (w->cloud.n > 0) {
         rc = g3d_gaussians_init_from_points(&r->scene, w->cloud.xyz, w->cloud.rgb, w->cloud.n, p->sh_degree);
     } else {
         g3d_log(G3D_LOG_WARN, "no point cloud: starting from %d random points", G3D_RANDOM_INIT_POINTS);
@@ -515,6 +529,7 @@ static g3d_status stage_splats(run *r)
     if (rc == G3D_OK) {
         g3d_train_params tp = p->train;
         tp.seed = p->seed;
+        if (w->n_views > 0) tp.first_view_every = p->input_every;
         tp.progress = r->progress;
         rc = g3d_train(&r->scene, views, nviews, &tp, &r->train);
     }
@@ -722,6 +737,8 @@ static cJSON *config_json(const run *r)
     cJSON_AddNumberToObject(c, "explore_angle", p->explore.angle_deg);
     cJSON_AddNumberToObject(c, "iterations", (double)p->train.iterations);
     cJSON_AddNumberToObject(c, "sh_degree", p->sh_degree);
+    cJSON_AddStringToObject(c, "init", p->knn_init ? "knn" : "footprint");
+    cJSON_AddNumberToObject(c, "input_every", p->input_every);
     cJSON_AddStringToObject(c, "video_trajectory", p->video_trajectory);
     cJSON_AddNumberToObject(c, "video_frames", p->video_frames);
     cJSON_AddNumberToObject(c, "fps", p->video_params.fps);

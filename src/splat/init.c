@@ -178,3 +178,82 @@ g3d_status g3d_gaussians_init_random(g3d_gaussians *g, const g3d_train_view *vie
     free(rgb);
     return rc;
 }
+
+/* One Gaussian from a pixel footprint: the covariance k^2 (sx sx^T + sy sy^T) in the plane the
+ * two steps span (its principal axes from the 2x2 eigenproblem in an orthonormal basis of that
+ * plane), and `thin` times the smaller in-plane axis along the normal. */
+static void footprint_shape(const float *span, double k, double thin, float *log_scales, float *rot)
+{
+    g3d_vec3 sx = g3d_v3(span[0], span[1], span[2]), sy = g3d_v3(span[3], span[4], span[5]);
+    double a = g3d_v3_norm(sx);
+    g3d_vec3 e1 = g3d_v3_scale(sx, 1.0 / a);
+    double b1 = g3d_v3_dot(sy, e1);
+    g3d_vec3 r = g3d_v3_sub(sy, g3d_v3_scale(e1, b1));
+    double b2 = g3d_v3_norm(r);
+    if (!(b2 > 1e-9 * a)) {  /* degenerate: the steps are parallel; any vector across */
+        g3d_vec3 t = fabs(e1.x) < 0.9 ? g3d_v3(1, 0, 0) : g3d_v3(0, 1, 0);
+        r = g3d_v3_sub(t, g3d_v3_scale(e1, g3d_v3_dot(t, e1)));
+        b2 = 0;
+    }
+    g3d_vec3 e2 = g3d_v3_scale(r, 1.0 / g3d_v3_norm(r));
+    /* [[a^2 + b1^2, b1 b2], [b1 b2, b2^2]] in (e1, e2) */
+    double cxx = a * a + b1 * b1, cxy = b1 * b2, cyy = b2 * b2;
+    double mean = 0.5 * (cxx + cyy), diff = 0.5 * (cxx - cyy), rad = sqrt(diff * diff + cxy * cxy);
+    double l1 = mean + rad, l2 = fmax(mean - rad, 1e-4 * l1), th = 0.5 * atan2(2 * cxy, cxx - cyy);
+    g3d_vec3 u1 = g3d_v3_add(g3d_v3_scale(e1, cos(th)), g3d_v3_scale(e2, sin(th)));
+    g3d_vec3 u2 = g3d_v3_cross(g3d_v3_cross(e1, e2), u1), nrm = g3d_v3_cross(u1, u2);
+    double s1 = k * sqrt(l1), s2 = k * sqrt(l2);
+    log_scales[0] = (float)log(s1);
+    log_scales[1] = (float)log(s2);
+    log_scales[2] = (float)log(thin * s2);
+    g3d_mat4 m = g3d_mat4_identity();
+    const g3d_vec3 cols[3] = {u1, u2, nrm};
+    for (int c = 0; c < 3; c++) {
+        m.m[0][c] = cols[c].x;
+        m.m[1][c] = cols[c].y;
+        m.m[2][c] = cols[c].z;
+    }
+    g3d_quat q = g3d_quat_from_mat4(m);
+    rot[0] = (float)q.w;
+    rot[1] = (float)q.x;
+    rot[2] = (float)q.y;
+    rot[3] = (float)q.z;
+}
+
+g3d_status g3d_gaussians_init_from_footprints(g3d_gaussians *g, const float *xyz, const float *rgb, const float *span,
+                                              int64_t n, int sh_degree, const g3d_footprint_init *p)
+{
+    if (n < 1) return G3D_ERR(G3D_ERR_ARG, "init from footprints: %lld points", (long long)n);
+    if (!(p->scale > 0) || !(p->thin > 0) || !(p->opacity > 0 && p->opacity < 1))
+        return G3D_ERR(G3D_ERR_ARG, "init from footprints: scale %g, thin %g, opacity %g (need > 0, > 0, in (0, 1))",
+                       p->scale, p->thin, p->opacity);
+    for (int64_t i = 0; i < n; i++) {
+        const float *s = span + 6 * i;
+        for (int a = 0; a < 6; a++)
+            if (!isfinite(s[a]) || (a < 3 && (!isfinite(xyz[3 * i + a]) || !isfinite(rgb[3 * i + a]))))
+                return G3D_ERR(G3D_ERR_ARG, "init from footprints: point %lld is not finite", (long long)i);
+        if (!(s[0] * s[0] + s[1] * s[1] + s[2] * s[2] > 0))
+            return G3D_ERR(G3D_ERR_ARG, "init from footprints: point %lld has no footprint", (long long)i);
+    }
+    G3D_TRY(g3d_gaussians_create(g, n, sh_degree));
+    g->n = n;
+    const int K = G3D_SH_COEFFS(sh_degree);
+    const float logit = (float)log(p->opacity / (1 - p->opacity));
+#pragma omp parallel for schedule(static)
+    for (int64_t i = 0; i < n; i++) {
+        footprint_shape(span + 6 * i, p->scale, p->thin, g->log_scales + 3 * i, g->rots + 4 * i);
+        for (int a = 0; a < 3; a++) {
+            g->means[3 * i + a] = xyz[3 * i + a];
+            g->sh[(size_t)i * K * 3 + a] = (rgb[3 * i + a] - 0.5f) / G3D_SH_C0;
+        }
+        g->opacity_logits[i] = logit;
+    }
+    return G3D_OK;
+}
+
+void g3d_footprint_init_default(g3d_footprint_init *p)
+{
+    p->scale = 0.5;
+    p->thin = 0.2;
+    p->opacity = 0.5;
+}

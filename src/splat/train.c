@@ -347,7 +347,9 @@ g3d_status g3d_train(g3d_gaussians *g, const g3d_train_view *views, int nviews,
             g3d_gaussians_free(&grads);
             if ((rc = g3d_gaussians_create(&grads, g->capacity, g->sh_degree)) != G3D_OK) break;
         }
-        if (s.remaining == 0) { /* a fresh seeded permutation every epoch */
+        /* the first view on its own beat, outside the permutation (so the epochs stay whole) */
+        const int first = p->first_view_every > 0 && it % p->first_view_every == 0;
+        if (!first && s.remaining == 0) { /* a fresh seeded permutation every epoch */
             for (int i = 0; i < nviews; i++) s.order[i] = i;
             for (int i = nviews - 1; i > 0; i--) {
                 int j = (int)g3d_rng_below(&s.rng, (uint32_t)i + 1);
@@ -355,7 +357,7 @@ g3d_status g3d_train(g3d_gaussians *g, const g3d_train_view *views, int nviews,
             }
             s.remaining = nviews;
         }
-        const int vi = s.order[--s.remaining];
+        const int vi = first ? 0 : s.order[--s.remaining];
         const g3d_train_view *v = coarse_on && it <= p->coarse_until ? &coarse[vi] : &views[vi];
         rs.sh_degree_active = (int)((it - 1) / (p->sh_degree_interval > 0 ? p->sh_degree_interval : 1));
         if (rs.sh_degree_active > g->sh_degree) rs.sh_degree_active = g->sh_degree;
