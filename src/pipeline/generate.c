@@ -221,6 +221,26 @@ static g3d_status make_lama_or_classic(const g3d_generate_params *p, const char 
     return G3D_OK;
 }
 
+/* Loads the Stable Diffusion model `model` with the run's parts (VAE, text encoder, tokenizer,
+ * configuration), and the ControlNet `controlnet` when not NULL. */
+static g3d_status load_sd(const g3d_generate_params *p, const char *model, const char *controlnet, g3d_sd **m)
+{
+    g3d_sd_paths paths = p->sd_parts;
+    paths.model = model;
+    if (controlnet) paths.controlnet = controlnet;
+    return g3d_sd_load(&paths, m);
+}
+
+/* The diffusion inpainter (sd_views.h) on m, which it owns from here, with the run's settings
+ * and progress; prefill, when not NULL, fills the ControlNet's hint. */
+static g3d_status make_sd_views(run *r, g3d_sd *m, const g3d_inpainter *prefill, g3d_inpainter *out)
+{
+    g3d_sd_view_params vp = r->p->diffusion;
+    vp.progress = r->progress;
+    if (prefill) vp.prefill = prefill;
+    return g3d_inpainter_sd_views_create(m, &vp, out);
+}
+
 /* The inpainter: the caller's, LaMa from p->lama_model, or the classical one. Made before the
  * input is loaded, so that a bad checkpoint fails before any work. */
 static g3d_status make_inpainter(run *r)
@@ -229,15 +249,11 @@ static g3d_status make_inpainter(run *r)
     r->inpainter = p->inpainter ? p->inpainter : &r->own_inpainter;
     if (p->inpainter) return G3D_OK;
     if (p->inpaint_model) {
-        g3d_sd_paths paths = p->sd_parts;
         g3d_sd *m;
-        paths.model = p->inpaint_model;
-        G3D_TRY(g3d_sd_load(&paths, &m));
+        G3D_TRY(load_sd(p, p->inpaint_model, NULL, &m));
         char desc[512];
         g3d_log(G3D_LOG_INFO, "inpainter: %s (%s)", p->inpaint_model, g3d_sd_unet_describe(g3d_sd_get_unet(m), desc, sizeof desc));
-        g3d_sd_view_params vp = p->diffusion;
-        vp.progress = r->progress;
-        return g3d_inpainter_sd_views_create(m, &vp, &r->own_inpainter);
+        return make_sd_views(r, m, NULL, &r->own_inpainter);
     }
     return make_lama_or_classic(p, "inpainter", &r->own_inpainter);
 }
@@ -249,19 +265,13 @@ static g3d_status make_bg_inpainter(run *r)
     const g3d_generate_params *p = r->p;
     if (!p->layers || p->bg_inpainter || !p->controlnet_model) return G3D_OK;
     G3D_TRY(make_lama_or_classic(p, "background prefill", &r->own_prefill));
-    g3d_sd_paths paths = p->sd_parts;
     g3d_sd *m;
-    paths.model = p->inpaint_model;
-    paths.controlnet = p->controlnet_model;
-    G3D_TRY(g3d_sd_load(&paths, &m));
+    G3D_TRY(load_sd(p, p->inpaint_model, p->controlnet_model, &m));
     char desc[512];
     g3d_log(G3D_LOG_INFO, "background: %s (%s), hint prefilled by %s", p->controlnet_model,
             g3d_sd_controlnet_describe(g3d_sd_controlnet_get_config(g3d_sd_get_controlnet(m)), desc, sizeof desc),
             r->own_prefill.name);
-    g3d_sd_view_params vp = p->diffusion;
-    vp.progress = r->progress;
-    vp.prefill = &r->own_prefill;
-    return g3d_inpainter_sd_views_create(m, &vp, &r->own_bg);
+    return make_sd_views(r, m, &r->own_prefill, &r->own_bg);
 }
 
 /* The run's prompts (generate.h, PROMPTS): the user's view prompt, else the provider's, else
@@ -311,11 +321,9 @@ static g3d_status make_prompts(run *r)
 static g3d_status text_input(run *r)
 {
     const g3d_generate_params *p = r->p;
-    g3d_sd_paths paths = p->sd_parts;
     g3d_sd *m;
     g3d_image img = {0};
-    paths.model = p->sd_model;
-    G3D_TRY(g3d_sd_load(&paths, &m));
+    G3D_TRY(load_sd(p, p->sd_model, NULL, &m));
     int k = g3d_sd_size_multiple(m), side = p->diffusion.size / k * k;
     g3d_sd_params sp = p->diffusion.sd;
     sp.prompt = p->prompt;
