@@ -116,7 +116,8 @@ static g3d_sd_paths paths(const char *controlnet)
     return (g3d_sd_paths){.model = model, .vae = vae, .text_encoder = text, .tokenizer = tok, .prediction = -1, .controlnet = cn};
 }
 
-/* The ControlNet in the inpainting loop: scale 0 gives the plain model's picture exactly, scale 1
+/* The ControlNet in the inpainting loop: scale 0 gives the plain model's picture exactly (the
+ * ControlNet is not run), also after a shared holder let go of the model; scale 1
  * another one with the known pixels kept; the hint built inside is the helper's. */
 TEST(controlnet_in_the_loop)
 {
@@ -143,6 +144,12 @@ TEST(controlnet_in_the_loop)
     p.control_scale = 0.0f;
     CHECK_OK(g3d_sd_inpaint(m, &p, &img, &mask, &a));
     CHECK_OK(g3d_sd_inpaint(plain, &p, &img, &mask, &b));
+    CHECK(a.data && b.data && !memcmp(a.data, b.data, sizeof(float) * g3d_image_size(&a)));
+    g3d_image_free(&b);
+    /* a second holder: the first free leaves the model whole, the last (at done) frees it */
+    CHECK(g3d_sd_share(m) == m);
+    g3d_sd_free(m);
+    CHECK_OK(g3d_sd_inpaint(m, &p, &img, &mask, &b));
     CHECK(a.data && b.data && !memcmp(a.data, b.data, sizeof(float) * g3d_image_size(&a)));
     g3d_image_free(&a);
     g3d_image_free(&b);

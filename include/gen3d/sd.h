@@ -263,6 +263,10 @@ typedef struct g3d_sd g3d_sd;
  * ControlNet must fit the UNet) and weights that are not finite (naming the tensor). The
  * model's files stay mapped until g3d_sd_free. */
 g3d_status g3d_sd_load(const g3d_sd_paths *p, g3d_sd **out);
+/* Gives one more holder the model (e.g. two plug-ins that each free what they own): each
+ * holder calls g3d_sd_free, and the last call frees it. Not thread-safe. Returns m. */
+g3d_sd *g3d_sd_share(g3d_sd *m);
+/* Frees the model once every holder (g3d_sd_share) has let it go. NULL is allowed. */
 void g3d_sd_free(g3d_sd *m);
 const g3d_sd_unet_config *g3d_sd_get_unet(const g3d_sd *m);
 /* Picture sides must be multiples of this (the VAE's factor times the UNet's 2^(levels-1): 64 for SD). */
@@ -284,7 +288,8 @@ typedef struct g3d_sd_params {
                                  from `prefill` when given (g3d_sd_inpaint_hint) */
     const g3d_image *prefill; /* inpainting with a ControlNet: the picture with its hole already filled
                                  (e.g. by LaMa), the picture's size; the hint takes its colours there */
-    float control_scale;      /* the ControlNet's residuals are multiplied by this (1) */
+    float control_scale;      /* the ControlNet's residuals are multiplied by this (1); 0 does not run the
+                                 ControlNet, and needs no control image */
     g3d_progress progress;    /* stage "denoise": step, total */
     int truncated;            /* out: prompt tokens dropped because they did not fit (both prompts) */
     int fallback;             /* out, inpainting: 1 when a text-to-image model inpainted by latent blending */

@@ -19,11 +19,22 @@ struct g3d_sd {
     g3d_sd_vae *vae;
     g3d_clip_text *text;
     g3d_clip_tokenizer *tok;
+    int holders;       /* g3d_sd_share calls not yet matched by g3d_sd_free */
 };
+
+g3d_sd *g3d_sd_share(g3d_sd *m)
+{
+    if (m) m->holders++;
+    return m;
+}
 
 void g3d_sd_free(g3d_sd *m)
 {
     if (!m) return;
+    if (m->holders > 0) {
+        m->holders--;
+        return;
+    }
     g3d_sd_unet_free(m->unet);
     g3d_sd_vae_free(m->vae);
     g3d_clip_text_free(m->text);
@@ -349,6 +360,7 @@ static g3d_status check_params(const g3d_sd *m, const g3d_sd_params *p)
 static g3d_status control_hint(loop *L)
 {
     const g3d_image *c = L->p->control;
+    if (L->m->cn && L->p->control_scale == 0) return G3D_OK; /* its residuals would all be 0: not run */
     if (!c) return L->m->cn ? G3D_ERR(G3D_ERR_ARG, "the ControlNet needs a control image") : G3D_OK;
     if (!L->m->cn) return G3D_ERR(G3D_ERR_ARG, "a control image without a ControlNet");
     int ch = g3d_sd_controlnet_get_config(L->m->cn)->hint_ch, W = L->w * G3D_SD_HINT_FACTOR, H = L->h * G3D_SD_HINT_FACTOR;
@@ -525,7 +537,7 @@ g3d_status g3d_sd_inpaint(const g3d_sd *m, g3d_sd_params *p, const g3d_image *im
             L.lmask = lm;
             L.noise0 = noise0;
         }
-        if (m->cn && !p->control) {
+        if (m->cn && !p->control && p->control_scale != 0) {
             rc = g3d_sd_inpaint_hint(image, mask, p->prefill, L.w * G3D_SD_HINT_FACTOR, L.h * G3D_SD_HINT_FACTOR, &hint);
             p->control = &hint;
         }

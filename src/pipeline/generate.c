@@ -71,6 +71,7 @@ typedef struct run {
     const g3d_frame *input;
     g3d_inpainter own_inpainter;
     g3d_inpainter own_bg, own_prefill; /* the ControlNet's background inpainter and its prefill */
+    g3d_sd *views_sd;                  /* the views' model when it carries the background's ControlNet */
     g3d_depth_estimator own_depth;
     g3d_mask_provider own_masks;
     g3d_prompt_provider own_prompts;   /* the automatic prompts made here */
@@ -232,17 +233,26 @@ static g3d_status load_sd(const g3d_generate_params *p, const char *model, const
 }
 
 /* The diffusion inpainter (sd_views.h) on m, which it owns from here, with the run's settings
- * and progress; prefill, when not NULL, fills the ControlNet's hint. */
+ * and progress; prefill, when not NULL, fills the ControlNet's hint. Without prefill a model's
+ * ControlNet (the background's, sharing the model) is not run. */
 static g3d_status make_sd_views(run *r, g3d_sd *m, const g3d_inpainter *prefill, g3d_inpainter *out)
 {
     g3d_sd_view_params vp = r->p->diffusion;
     vp.progress = r->progress;
     if (prefill) vp.prefill = prefill;
+    else vp.sd.control_scale = 0;
     return g3d_inpainter_sd_views_create(m, &vp, out);
 }
 
+/* Whether the background is filled through the ControlNet (make_bg_inpainter). */
+static int controlnet_background(const g3d_generate_params *p)
+{
+    return p->layers && !p->bg_inpainter && p->controlnet_model;
+}
+
 /* The inpainter: the caller's, LaMa from p->lama_model, or the classical one. Made before the
- * input is loaded, so that a bad checkpoint fails before any work. */
+ * input is loaded, so that a bad checkpoint fails before any work. A diffusion inpainter is
+ * loaded with the background's ControlNet, so that the two hold one copy of the base model. */
 static g3d_status make_inpainter(run *r)
 {
     const g3d_generate_params *p = r->p;
@@ -250,23 +260,26 @@ static g3d_status make_inpainter(run *r)
     if (p->inpainter) return G3D_OK;
     if (p->inpaint_model) {
         g3d_sd *m;
-        G3D_TRY(load_sd(p, p->inpaint_model, NULL, &m));
+        G3D_TRY(load_sd(p, p->inpaint_model, controlnet_background(p) ? p->controlnet_model : NULL, &m));
         char desc[512];
         g3d_log(G3D_LOG_INFO, "inpainter: %s (%s)", p->inpaint_model, g3d_sd_unet_describe(g3d_sd_get_unet(m), desc, sizeof desc));
-        return make_sd_views(r, m, NULL, &r->own_inpainter);
+        G3D_TRY(make_sd_views(r, m, NULL, &r->own_inpainter));
+        if (g3d_sd_get_controlnet(m)) r->views_sd = m;
+        return G3D_OK;
     }
     return make_lama_or_classic(p, "inpainter", &r->own_inpainter);
 }
 
 /* The background's inpainter when a ControlNet is given: the inpainting model with the
- * ControlNet, its hint's hole prefilled by LaMa or the classical inpainter. */
+ * ControlNet (the views' model when it has it), its hint's hole prefilled by LaMa or the
+ * classical inpainter. */
 static g3d_status make_bg_inpainter(run *r)
 {
     const g3d_generate_params *p = r->p;
-    if (!p->layers || p->bg_inpainter || !p->controlnet_model) return G3D_OK;
+    if (!controlnet_background(p)) return G3D_OK;
     G3D_TRY(make_lama_or_classic(p, "background prefill", &r->own_prefill));
-    g3d_sd *m;
-    G3D_TRY(load_sd(p, p->inpaint_model, p->controlnet_model, &m));
+    g3d_sd *m = g3d_sd_share(r->views_sd);
+    if (!m) G3D_TRY(load_sd(p, p->inpaint_model, p->controlnet_model, &m));
     char desc[512];
     g3d_log(G3D_LOG_INFO, "background: %s (%s), hint prefilled by %s", p->controlnet_model,
             g3d_sd_controlnet_describe(g3d_sd_controlnet_get_config(g3d_sd_get_controlnet(m)), desc, sizeof desc),
