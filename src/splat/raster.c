@@ -577,7 +577,9 @@ static void blend_tile_bwd(g3d_raster_ws *ws, int64_t tile, const float *d_rgb, 
         }
     }
     const float *bg = ws->s.bg;
-    const int64_t a = ws->tile_start[tile];
+    const int64_t a = ws->tile_start[tile], b = ws->tile_start[tile + 1];
+    /* instances behind every pixel's last contributor are never visited: zero records */
+    for (int64_t k = a + maxlast + 1; k < b; k++) memset(ws->rec + (size_t)ws->inst_src[k] * REC, 0, sizeof(float) * REC);
     for (int64_t k = a + maxlast; k >= a; k--) {
         const int32_t gi = ws->inst_gid[k];
         const float *q = ws->pk + (size_t)PK * gi;
@@ -745,8 +747,6 @@ g3d_status g3d_raster_bwd(g3d_raster_ws *ws, const g3d_gaussians *g, const float
                        "does not fit the model (%lld Gaussians, SH degree %d)", (long long)grads->capacity,
                        grads->sh_degree, (long long)g->n, g->sh_degree);
     const int64_t ntiles = (int64_t)ws->gx * ws->gy;
-    /* records of instances behind every pixel's last contributor are never visited: zero first */
-    memset(ws->rec, 0, sizeof(float) * REC * (size_t)ws->n_inst);
 #pragma omp parallel for schedule(dynamic, 1)
     for (int64_t t = 0; t < ntiles; t++) blend_tile_bwd(ws, t, d_rgb, d_alpha, d_depth);
     gaussian_grads(ws, g, grads, grad2d);
