@@ -151,6 +151,12 @@ static rows thread_rows(const loss_job *jb, int thread)
     return r;
 }
 
+/* An empty window of `planes` planes whose first output row is y0. */
+static window window_from(const loss_job *jb, const rows *r, int planes, int y0)
+{
+    return (window){r->ring, r->zero, planes, jb->w * jb->c, jb->c, jb->h, y0 - HALF > 0 ? y0 - HALF : 0};
+}
+
 /* ok[j] = 1 where the pixel of value j is valid, else 0 */
 static inline void validity(const float *mrow, double *ok, int w, int c)
 {
@@ -233,17 +239,15 @@ static void forward_rows(const loss_job *jb, const rows *r, int y0, int y1)
 {
     const int w = jb->w, h = jb->h, c = jb->c, n = w * c;
     const size_t np = padded(n, c);
-    window wd = {r->ring, r->zero, FWD_PLANES, n, c, h, y0 - HALF > 0 ? y0 - HALF : 0};
-    double k[WIN];
-    memcpy(k, jb->k, sizeof k);
+    window wd = window_from(jb, r, FWD_PLANES, y0);
     for (int y = y0; y < y1; y++) {
         for (; wd.top < h && wd.top <= y + HALF;) {
             double *p = r->src + HALF * c;
             moment_sources(jb->pred + (size_t)wd.top * n, jb->target + (size_t)wd.top * n, p, p + np, p + 2 * np,
                            p + 3 * np, p + 4 * np, n);
-            window_push(&wd, r->src, np, k);
+            window_push(&wd, r->src, np, jb->k);
         }
-        window_row(&wd, y, r->out, k);
+        window_row(&wd, y, r->out, jb->k);
         const double *mu1 = r->out, *mu2 = mu1 + n, *e11 = mu2 + n, *e22 = e11 + n, *e12 = e22 + n;
         const float *mrow = jb->mask ? jb->mask + (size_t)y * w : NULL;
         if (jb->eval) { /* the map over the pixels whose window lies inside the image */
@@ -282,13 +286,11 @@ static void backward_rows(const loss_job *jb, const rows *r, int y0, int y1)
 {
     const int w = jb->w, h = jb->h, c = jb->c, n = w * c;
     const size_t np = padded(n, c);
-    window wd = {r->ring, r->zero, BWD_PLANES, n, c, h, y0 - HALF > 0 ? y0 - HALF : 0};
-    double k[WIN];
-    memcpy(k, jb->k, sizeof k);
+    window wd = window_from(jb, r, BWD_PLANES, y0);
     const double l1w = 1 - jb->lambda, count = jb->count;
     for (int y = y0; y < y1; y++) {
-        for (; wd.top < h && wd.top <= y + HALF;) window_push(&wd, jb->wts + wd.top * np, h * np, k);
-        window_row(&wd, y, r->out, k);
+        for (; wd.top < h && wd.top <= y + HALF;) window_push(&wd, jb->wts + wd.top * np, h * np, jb->k);
+        window_row(&wd, y, r->out, jb->k);
         const double *restrict ba = r->out, *restrict bb = ba + n, *restrict bc = bb + n, *restrict ok = r->ok;
         const float *restrict pr = jb->pred + (size_t)y * n, *restrict tr = jb->target + (size_t)y * n;
         validity(jb->mask ? jb->mask + (size_t)y * w : NULL, r->ok, w, c);
