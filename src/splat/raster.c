@@ -339,10 +339,6 @@ static void project_all(g3d_raster_ws *ws, const g3d_gaussians *g)
 
 /* ---- binning and sort ---------------------------------------------------------------------- */
 
-/* Lists in depth order visit the Gaussians' data all over memory (megabytes at 50 k Gaussians):
- * the loops over them ask for the data this many entries ahead. */
-#define PREFETCH 8
-
 /* One instance per (Gaussian, touched tile), grouped by tile and ordered inside a tile by
  * (view depth, Gaussian id): a total, deterministic order. The Gaussians are sorted once by a
  * stable radix sort of their depth bits (view depth > near > 0, so the IEEE bits order like the
@@ -390,15 +386,10 @@ static g3d_status bin_and_sort(g3d_raster_ws *ws, int64_t n)
     memcpy(cur, start, sizeof(int64_t) * (size_t)ntiles);
     for (int64_t r = 0; r < nv; r++) {
         const int32_t gi = id[r];
-        if (r + PREFETCH < nv) { /* depth order visits the Gaussians all over memory */
-            __builtin_prefetch(ws->rect + 4 * id[r + PREFETCH]);
-            __builtin_prefetch(ws->offs + id[r + PREFETCH]);
-        }
         const int32_t *rc = ws->rect + 4 * gi;
-        const int tx0 = rc[0], ty0 = rc[1], tx1 = rc[2], ty1 = rc[3];
         int64_t src = ws->offs[gi];
-        for (int ty = ty0; ty < ty1; ty++)
-            for (int tx = tx0; tx < tx1; tx++) {
+        for (int ty = rc[1]; ty < rc[3]; ty++)
+            for (int tx = rc[0]; tx < rc[2]; tx++) {
                 const int64_t k = cur[(int64_t)ty * ws->gx + tx]++;
                 ws->inst_gid[k] = gi;
                 ws->inst_src[k] = src++;
@@ -456,6 +447,10 @@ VINLINE void local_box(const g3d_raster_ws *ws, int32_t gi, int tx, int ty, int 
     *x1 = fx1 > TILE - 1 ? TILE - 1 : (int)fx1;
     *y1 = fy1 > TILE - 1 ? TILE - 1 : (int)fy1;
 }
+
+/* The tile lists visit the Gaussians' records in depth order, all over memory (64 bytes each,
+ * megabytes at 50 k Gaussians): the blends ask for the record this many entries ahead. */
+#define PREFETCH 8
 
 /* Built for three instruction sets, picked at run time: 16-lane rows are one AVX-512 register,
  * two AVX2 registers, or four SSE2 registers. */
