@@ -106,8 +106,9 @@ int main(int argc, char **argv)
     /* OpenSplat's CPU trainer (libtorch), ms per iteration on this class of 2-core machine */
     const double opensplat[2][2] = {{147, 311}, {677, 1035}};
     int only_w = 0, only_h = 0, only_n = 0;
-    if (argc == 3 && (sscanf(argv[1], "%dx%d", &only_w, &only_h) != 2 || sscanf(argv[2], "%d", &only_n) != 1 ||
-                      only_w < 16 || only_h < 16 || only_n < 1)) {
+    if ((argc != 1 && argc != 3) ||
+        (argc == 3 && (sscanf(argv[1], "%dx%d", &only_w, &only_h) != 2 || sscanf(argv[2], "%d", &only_n) != 1 ||
+                       only_w < 16 || only_h < 16 || only_n < 1))) {
         fprintf(stderr, "usage: bench_train [WxH N]\n");
         return 2;
     }
