@@ -117,7 +117,8 @@ int main(int argc, char **argv)
            "render", "OpenSplat ms/iter / ours");
     for (int si = 0; si < 3; si++)
         for (int ci = 0; ci < 2; ci++) {
-            int W = si < 2 ? sizes[si][0] : only_w, H = si < 2 ? sizes[si][1] : only_h, N = si < 2 ? counts[ci] : only_n;
+            const int W = si < 2 ? sizes[si][0] : only_w, H = si < 2 ? sizes[si][1] : only_h;
+            const int N = si < 2 ? counts[ci] : only_n;
             if (only_n ? si < 2 || ci > 0 : si == 2) continue;
             int known = -1;
             for (int k = 0; k < 4; k++)

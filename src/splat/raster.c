@@ -579,7 +579,8 @@ static void blend_tile_bwd(g3d_raster_ws *ws, int64_t tile, const float *d_rgb, 
     const float *bg = ws->s.bg;
     const int64_t a = ws->tile_start[tile], b = ws->tile_start[tile + 1];
     /* instances behind every pixel's last contributor are never visited: zero records */
-    for (int64_t k = a + maxlast + 1; k < b; k++) memset(ws->rec + (size_t)ws->inst_src[k] * REC, 0, sizeof(float) * REC);
+    for (int64_t k = a + maxlast + 1; k < b; k++)
+        memset(ws->rec + (size_t)ws->inst_src[k] * REC, 0, sizeof(float) * REC);
     for (int64_t k = a + maxlast; k >= a; k--) {
         const int32_t gi = ws->inst_gid[k];
         const float *q = ws->pk + (size_t)PK * gi;
