@@ -1,7 +1,8 @@
 /* Training speed: milliseconds per full iteration (rasterizer forward, masked L1 + SSIM loss
  * forward and backward, rasterizer backward, Adam) on synthetic scenes at the sizes of
  * OpenSplat's published CPU trainer timings on this class of 2-core machine, with a per-stage
- * breakdown and the ratio to those figures; render frames/s for the same scenes. */
+ * breakdown and the ratio to those figures; render frames/s for the same scenes.
+ * `bench_train WxH N` runs one row (any size; the ratio column only for the table's sizes). */
 #include "gen3d/adam.h"
 #include "gen3d/loss.h"
 #include "gen3d/raster.h"
@@ -100,23 +101,36 @@ static result run(int n, int W, int H, int reps)
 int main(int argc, char **argv)
 {
     g3d_process_setup(argv);
-    (void)argc;
     const int sizes[2][2] = {{256, 192}, {512, 384}};
     const int counts[2] = {5000, 50000};
     /* OpenSplat's CPU trainer (libtorch), ms per iteration on this class of 2-core machine */
     const double opensplat[2][2] = {{147, 311}, {677, 1035}};
+    int only_w = 0, only_h = 0, only_n = 0;
+    if ((argc != 1 && argc != 3) ||
+        (argc == 3 && (sscanf(argv[1], "%dx%d", &only_w, &only_h) != 2 || sscanf(argv[2], "%d", &only_n) != 1 ||
+                       only_w < 16 || only_h < 16 || only_n < 1))) {
+        fprintf(stderr, "usage: bench_train [WxH N]\n");
+        return 2;
+    }
     printf("threads: %d; SH degree 3; mean of 20 iterations after a warm-up\n", omp_get_max_threads());
     printf("%-9s %6s | %9s | %9s | %-44s | %9s | %s\n", "image", "N", "ms/iter", "cpu ms", "fwd / loss / zero / bwd / adam (ms)",
            "render", "OpenSplat ms/iter / ours");
-    for (int si = 0; si < 2; si++)
+    for (int si = 0; si < 3; si++)
         for (int ci = 0; ci < 2; ci++) {
-            result r = run(counts[ci], sizes[si][0], sizes[si][1], 20);
-            char st[128];
+            const int W = si < 2 ? sizes[si][0] : only_w, H = si < 2 ? sizes[si][1] : only_h;
+            const int N = si < 2 ? counts[ci] : only_n;
+            if (only_n ? si < 2 || ci > 0 : si == 2) continue;
+            int known = -1;
+            for (int k = 0; k < 4; k++)
+                if (W == sizes[k / 2][0] && H == sizes[k / 2][1] && N == counts[k % 2]) known = k;
+            result r = run(N, W, H, 20);
+            char st[128], ratio[16] = "-";
             int k = 0;
             for (int s = 0; s < ST_COUNT; s++)
                 k += snprintf(st + k, sizeof st - k, "%s%.1f", s ? " / " : "", r.stage_ms[s]);
-            printf("%4dx%-4d %6d | %7.1fms | %7.1fms | %-44s | %5.1f fps | %.1fx\n", sizes[si][0], sizes[si][1],
-                   counts[ci], r.iter_ms, r.cpu_ms, st, r.render_fps, opensplat[si][ci] / r.iter_ms);
+            if (known >= 0) snprintf(ratio, sizeof ratio, "%.1fx", opensplat[known / 2][known % 2] / r.iter_ms);
+            printf("%4dx%-4d %6d | %7.1fms | %7.1fms | %-44s | %5.1f fps | %s\n", W, H, N, r.iter_ms, r.cpu_ms, st,
+                   r.render_fps, ratio);
         }
     printf("stages: %s", STAGE[0]);
     for (int s = 1; s < ST_COUNT; s++) printf(", %s", STAGE[s]);

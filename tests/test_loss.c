@@ -2,6 +2,9 @@
 #include "gen3d/loss.h"
 #include "testutil.h"
 
+#include <omp.h>
+#include <string.h>
+
 /* pred = target + an offset of at least 0.02 in magnitude, so the finite-difference steps
  * never cross the kink of |p - t|. */
 static void make_pair(g3d_image *pred, g3d_image *target, g3d_image *mask, int w, int h,
@@ -119,11 +122,39 @@ TEST(errors)
     g3d_image_free(&p); g3d_image_free(&t); g3d_image_free(&m); g3d_image_free(&small);
 }
 
+/* Each thread blurs a band of rows (and the few rows beside it again): the loss, its gradient
+ * and the evaluation SSIM must be the same bits for any thread count, also with bands of a
+ * few rows. */
+TEST(thread_count_invariance)
+{
+    g3d_image p = {0}, t = {0}, m = {0};
+    make_pair(&p, &t, &m, 40, 23, 13, 0.7f);
+    const int threads[4] = {1, 2, 3, 7};
+    double loss[4], ssim[4], eval[4];
+    g3d_image grad[4];
+    for (int r = 0; r < 4; r++) {
+        omp_set_num_threads(threads[r]);
+        CHECK_OK(g3d_image_create(&grad[r], p.w, p.h, p.c));
+        CHECK_OK(g3d_loss_fwd_bwd(&p, &t, &m, 0.2, &loss[r], &ssim[r], &grad[r]));
+        CHECK_OK(g3d_ssim(&p, &t, &m, &eval[r]));
+    }
+    for (int r = 1; r < 4; r++) {
+        CHECK(memcmp(&loss[r], &loss[0], sizeof(double)) == 0);
+        CHECK(memcmp(&ssim[r], &ssim[0], sizeof(double)) == 0);
+        CHECK(memcmp(&eval[r], &eval[0], sizeof(double)) == 0);
+        CHECK(memcmp(grad[r].data, grad[0].data, sizeof(float) * g3d_image_size(&p)) == 0);
+    }
+    CHECK(loss[0] > 0 && ssim[0] < 1);
+    for (int r = 0; r < 4; r++) g3d_image_free(&grad[r]);
+    g3d_image_free(&p); g3d_image_free(&t); g3d_image_free(&m);
+}
+
 int main(void)
 {
     RUN(gradient_masked);
     RUN(gradient_unmasked);
     RUN(known_values);
     RUN(errors);
+    RUN(thread_count_invariance);
     return test_summary();
 }

@@ -73,7 +73,10 @@ static inline void update(float *restrict x, float *restrict m, float *restrict 
 }
 
 /* Gaussians [i0, i1): every group with its rate; the SH of consecutive Gaussians are one
- * contiguous run, the DC and the rest differing only in the step size. */
+ * contiguous run, the DC and the rest differing only in the step size. Built for AVX-512, AVX2
+ * and SSE2 (the vector square roots and divisions are exact in every width, so the results
+ * are the same). */
+__attribute__((target_clones("avx512f", "avx2", "default")))
 static void update_range(g3d_adam *a, g3d_gaussians *x, const g3d_gaussians *g, size_t i0, size_t i1,
                          const step_consts k[G3D_PG_COUNT])
 {
