@@ -247,7 +247,7 @@ static void run_tile(const nn_gemm *g, const tiling *t, const scratch *s, int m0
      * in place and the epilogue runs there (the kernel writes whole vectors, so the tile's width
      * must be a multiple of 16; a last group of fewer than six rows still goes through the tile
      * buffer). Otherwise the tile buffer takes the product and the epilogue moves it: a copy of
-     * every output that had cost 3-7 % of a model's time. */
+     * every output that had cost 3-4 % of a Depth Anything pass. */
     const int direct = !g->qw && !g->rowoff && !(g->epi && g->epi->res) && nt % 16 == 0;
     float *const cdir = direct ? g->y + (long)m0 * g->ldy + n0 : NULL;
     int np = g->bkind == NN_B_CONV ? conv_pieces(g->conv, n0, nt, s->pieces) : 0;

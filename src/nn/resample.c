@@ -11,7 +11,6 @@
 #include "nn/nn_int.h"
 
 #include <math.h>
-#include <omp.h>
 #include <stdlib.h>
 
 #define BAND 16 /* output rows per task */
