@@ -4,6 +4,7 @@
  * must not depend on the thread count are compared bit for bit. */
 #include "nn/nn_int.h"
 #include "testutil.h"
+#include "gen3d/resize.h"
 
 #include <omp.h>
 
@@ -447,6 +448,44 @@ TEST(independent_of_thread_count)
     free(x), free(wc), free(wl), free(tok), free(qkv), free(g);
 }
 
+TEST(resize_bilinear_against_reference)
+{
+    /* c, h, w -> oh, ow, align_corners: the DPT head's and MoGe's resizes, odd factors,
+     * shrinking, identity, single pixels */
+    static const int cases[][6] = {{3, 5, 7, 10, 14, 0},      {2, 5, 7, 10, 14, 1},  {4, 37, 37, 74, 74, 1},
+                                   {2, 148, 148, 296, 296, 1}, {3, 74, 99, 518, 400, 1}, {3, 43, 29, 86, 58, 0},
+                                   {1, 9, 13, 4, 5, 0},        {2, 9, 13, 4, 5, 1},   {5, 17, 40, 17, 40, 0},
+                                   {2, 1, 1, 3, 4, 0},         {1, 6, 4, 1, 1, 1},    {2, 33, 21, 20, 35, 0}};
+    const int maxt = omp_get_max_threads();
+    for (int k = 0; k < (int)(sizeof cases / sizeof *cases); k++) {
+        const int c = cases[k][0], h = cases[k][1], w = cases[k][2], oh = cases[k][3], ow = cases[k][4], ac = cases[k][5];
+        const size_t n = (size_t)c * oh * ow;
+        float *x = rnd((size_t)c * h * w, 500 + k, 1), *ref = malloc(sizeof(float) * n), *img = malloc(sizeof(float) * n);
+        float *y[3];
+        nn_ref_resize_bilinear(x, c, h, w, ref, oh, ow, ac);
+        for (int ch = 0; ch < c; ch++)
+            CHECK_OK(g3d_resize_buffer(x + (size_t)ch * h * w, w, h, 1, img + (size_t)ch * oh * ow, ow, oh,
+                                       ac ? G3D_RESIZE_BILINEAR_AC : G3D_RESIZE_BILINEAR));
+        for (int t = 0; t < 3; t++) {
+            omp_set_num_threads(t + 1);
+            y[t] = malloc(sizeof(float) * n);
+            CHECK_OK(g3d_nn_resize_bilinear(x, c, h, w, y[t], oh, ow, ac));
+        }
+        omp_set_num_threads(maxt);
+        double e = err(y[0], ref, n), ei = err(ref, img, n);
+        CHECK_MSG(e < 1e-6 && ei < 1e-6, "%dx%d -> %dx%d ac %d: err %g (reference vs image resizer %g)", w, h, ow, oh,
+                  ac, e, ei);
+        CHECK_MSG(!memcmp(y[0], y[1], sizeof(float) * n) && !memcmp(y[0], y[2], sizeof(float) * n),
+                  "%dx%d -> %dx%d: differs between thread counts", w, h, ow, oh);
+        for (int t = 0; t < 3; t++) free(y[t]);
+        free(x), free(ref), free(img);
+    }
+    float v = 1.0f, o = 0.0f;
+    CHECK(g3d_nn_resize_bilinear(&v, 1, 0, 1, &o, 1, 1, 0) == G3D_ERR_ARG);
+    CHECK(g3d_nn_resize_bilinear(&v, 1, 1, 1, &o, 1, -2, 1) == G3D_ERR_ARG);
+    g3d_error_clear();
+}
+
 TEST(arena)
 {
     g3d_nn_arena *a = g3d_nn_arena_new(1000);
@@ -494,6 +533,7 @@ int main(void)
     RUN(norms_and_softmax_against_reference);
     RUN(fft_against_dft);
     RUN(independent_of_thread_count);
+    RUN(resize_bilinear_against_reference);
     RUN(arena);
     g3d_nn_fft_forget();
     return test_summary();

@@ -201,6 +201,11 @@ void g3d_nn_layernorm2d(const float *x, int c, int hw, const float *g, const flo
  * ==================================================================================== */
 /* Nearest-neighbour x2 upsampling: x [c, h, w] -> y [c, 2h, 2w]. */
 void g3d_nn_upsample2x(const float *x, int c, int h, int w, float *y);
+/* Bilinear resize x [c, h, w] -> y [c, oh, ow], PyTorch's F.interpolate(mode="bilinear",
+ * antialias=False): align_corners 1 maps the corner pixels onto each other (source coordinate
+ * o (in-1)/(out-1)), 0 maps pixel centres (clamped at 0). y must not alias x. Returns
+ * G3D_ERR_ARG for empty sizes, G3D_ERR_NOMEM. */
+g3d_status g3d_nn_resize_bilinear(const float *x, int c, int h, int w, float *y, int oh, int ow, int align_corners);
 /* Pads x [c, h, w] by top/bottom/left/right pixels -> y [c, h+top+bottom, w+left+right].
  * Reflect needs each pad < the side, symmetric <= the side (else G3D_ERR_ARG). Negative pads
  * are refused. */

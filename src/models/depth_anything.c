@@ -228,10 +228,7 @@ g3d_status g3d_dav2_net_size(int w, int h, int input_size, int *net_w, int *net_
 /* Bilinear align_corners=True resize of c planes [c, sh, sw] -> [c, dh, dw]. */
 static g3d_status resize_planes(const float *src, int c, int sh, int sw, float *dst, int dh, int dw)
 {
-    for (int i = 0; i < c; i++)
-        G3D_TRY(g3d_resize_buffer(src + (size_t)i * sh * sw, sw, sh, 1, dst + (size_t)i * dh * dw, dw, dh,
-                                  G3D_RESIZE_BILINEAR_AC));
-    return G3D_OK;
+    return g3d_nn_resize_bilinear(src, c, sh, sw, dst, dh, dw, 1);
 }
 
 static float *alloc_f(size_t n) { return malloc(sizeof(float) * (n ? n : 1)); }
@@ -255,15 +252,16 @@ static g3d_status residual_unit(const conv *c1, const conv *c2, const float *x, 
 }
 
 /* One RefineNet block: (path + rcu1(skip)) -> rcu2 -> bilinear to (oh, ow) -> 1x1 out_conv.
- * skip may be NULL. Returns a new [F, oh, ow] buffer in *out. */
+ * skip may be NULL. Returns a new [F, oh, ow] buffer in *out. The 1x1 convolution runs before
+ * the resize: both are linear, the resize's weights sum to one (so the bias commutes too), and
+ * at the input's size it has a quarter of the pixels. */
 static g3d_status fuse(const fusion *f, const float *path, const float *skip, int h, int w, int oh, int ow,
                        float **out)
 {
     int F = f->out.c.cin;
     size_t n = (size_t)F * h * w;
-    float *tmp = alloc_f(2 * n), *acc = alloc_f(n), *r = alloc_f(n), *up = alloc_f((size_t)F * oh * ow);
-    float *res = alloc_f((size_t)F * oh * ow);
-    g3d_status rc = tmp && acc && r && up && res ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
+    float *tmp = alloc_f(2 * n), *acc = alloc_f(n), *r = alloc_f(n), *res = alloc_f((size_t)F * oh * ow);
+    g3d_status rc = tmp && acc && r && res ? G3D_OK : G3D_ERR(G3D_ERR_NOMEM, "out of memory");
     if (rc == G3D_OK) {
         /* acc = path + (skip + rcu1's product), the second sum in the product's epilogue */
         memcpy(acc, path, sizeof(float) * n);
@@ -273,9 +271,9 @@ static g3d_status fuse(const fusion *f, const float *path, const float *skip, in
         }
     }
     if (rc == G3D_OK) rc = residual_unit(&f->rcu2a, &f->rcu2b, acc, acc, h, w, tmp, r);
-    if (rc == G3D_OK) rc = resize_planes(r, F, h, w, up, oh, ow);
-    if (rc == G3D_OK) rc = run_conv(&f->out, up, oh, ow, res, NULL);
-    free(tmp); free(acc); free(r); free(up);
+    if (rc == G3D_OK) rc = run_conv(&f->out, r, h, w, acc, NULL);
+    if (rc == G3D_OK) rc = resize_planes(acc, F, h, w, res, oh, ow);
+    free(tmp); free(acc); free(r);
     if (rc != G3D_OK) {
         free(res);
         res = NULL;
@@ -377,7 +375,7 @@ g3d_status g3d_dav2_predict(const g3d_dav2 *m, const float *rgb, int w, int h, i
     if (rc == G3D_OK)
         rc = g3d_dinov2_forward(m->backbone, x, H, W, m->layers, 4, feats, NULL, trace && trace->want ? &trace->backbone : NULL);
     if (rc == G3D_OK) rc = head(m, feats, H / PATCH, W / PATCH, net, trace);
-    if (rc == G3D_OK) rc = g3d_resize_buffer(net, W, H, 1, depth, w, h, G3D_RESIZE_BILINEAR_AC);
+    if (rc == G3D_OK) rc = resize_planes(net, 1, H, W, depth, h, w);
     if (rc == G3D_OK && trace && trace->want) {
         memcpy(trace->feature, feats, sizeof feats);
         memset(feats, 0, sizeof feats);

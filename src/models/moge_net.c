@@ -59,14 +59,6 @@ static g3d_status res_block(const conv *c1, const conv *c2, float *x, int h, int
     return conv_fwd(c2, b, h, w, x, &sum);
 }
 
-/* Per-plane resize of [c, sh, sw] into [c, dh, dw]. */
-static g3d_status resize_planes(const float *src, int c, int sh, int sw, float *dst, int dh, int dw, g3d_resize_mode mode)
-{
-    for (int i = 0; i < c; i++)
-        G3D_TRY(g3d_resize_buffer(src + (size_t)i * sh * sw, sw, sh, 1, dst + (size_t)i * dh * dw, dw, dh, mode));
-    return G3D_OK;
-}
-
 /* x [dim[l], h, w] -> *y [dim[l+1], 2h, 2w] (new buffer). */
 static g3d_status resample(const stack *s, int l, const float *x, int h, int w, float **y, scratch *sc)
 {
@@ -79,7 +71,7 @@ static g3d_status resample(const stack *s, int l, const float *x, int h, int w, 
         if (s->rs[l] == RS_CONV_TRANSPOSE) {
             rc = conv_fwd(&s->up[l], x, h, w, t, NULL);
         } else if (s->rs[l] == RS_BILINEAR) {
-            rc = resize_planes(x, c, h, w, t, 2 * h, 2 * w, G3D_RESIZE_BILINEAR);
+            rc = g3d_nn_resize_bilinear(x, c, h, w, t, 2 * h, 2 * w, 0);
         } else {
             for (int ch = 0; ch < c; ch++)
                 for (int r = 0; r < 2 * h; r++)
@@ -105,23 +97,15 @@ static g3d_status stack_forward(const stack *s, float *const *in, int rows, int 
     for (int l = 0; l < s->nlev && rc == G3D_OK; l++) {
         int h = rows << l, w = cols << l;
         size_t plane = (size_t)h * w, n = (size_t)s->dim[l] * plane;
-        if (in[l]) {
-            float *f = in[l];
-            if (s->din[l] > 0) {
-                if (!(f = alloc_f(n))) {
-                    rc = NOMEM();
-                    break;
-                }
-                rc = conv_fwd(&s->in[l], in[l], h, w, f, NULL);
-            }
-            if (rc == G3D_OK && !x) {
-                x = f == in[l] ? alloc_f(n) : f;
-                if (!x) rc = NOMEM();
-                else if (f == in[l]) memcpy(x, f, sizeof(float) * n);
-            } else if (rc == G3D_OK) {
-                g3d_nn_add(x, f, n);
-            }
-            if (f != in[l] && f != x) free(f);
+        if (in[l] && x) {
+            /* x += input block (in[l]): the sum rides in the 1x1 convolution's epilogue */
+            const g3d_nn_epi sum = {.res = x};
+            if (s->din[l] > 0) rc = conv_fwd(&s->in[l], in[l], h, w, x, &sum);
+            else g3d_nn_add(x, in[l], n);
+        } else if (in[l]) {
+            if (!(x = alloc_f(n))) rc = NOMEM();
+            else if (s->din[l] > 0) rc = conv_fwd(&s->in[l], in[l], h, w, x, NULL);
+            else memcpy(x, in[l], sizeof(float) * n);
         } else if (!x) {
             rc = G3D_ERR(G3D_ERR_INTERNAL, "MoGe: ConvStack level %d has no input", l);
         }
@@ -303,7 +287,7 @@ g3d_status g3d_moge_forward(const g3d_moge *m, const float *rgb, int w, int h, i
     for (int hd = 0; hd < NHEADS && rc == G3D_OK; hd++) {
         if (!m->has_head[hd]) continue;
         int c = HEAD_CH[hd];
-        rc = resize_planes(head_out[hd][nlev - 1], c, lh, lw, planes, h, w, G3D_RESIZE_BILINEAR);
+        rc = g3d_nn_resize_bilinear(head_out[hd][nlev - 1], c, lh, lw, planes, h, w, 0);
         if (rc == G3D_OK && !(*dst[hd] = alloc_f((size_t)c * npx))) rc = NOMEM();
         if (rc != G3D_OK) break;
         float *o = *dst[hd];

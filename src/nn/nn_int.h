@@ -118,6 +118,7 @@ void nn_ref_groupnorm(const float *x, int c, int hw, int groups, const float *g,
                       float *y);
 void nn_ref_layernorm2d(const float *x, int c, int hw, const float *g, const float *b, float eps, float *y);
 void nn_ref_softmax(float *x, int rows, int cols);
+void nn_ref_resize_bilinear(const float *x, int c, int h, int w, float *y, int oh, int ow, int align_corners);
 g3d_status nn_ref_rfft2(const float *x, int c, int h, int w, float *y);
 g3d_status nn_ref_irfft2(const float *y, int c, int h, int w, float *x);
 
