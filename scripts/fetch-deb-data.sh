@@ -4,7 +4,7 @@
 #   scripts/fetch-deb-data.sh PACKAGE PATH_IN_PACKAGE DIR FILE...
 # Copies each FILE found under PATH_IN_PACKAGE (a path ending, e.g. skimage/data) into DIR and
 # prints DIR as an absolute path (a relative DIR is taken from the repository root). Does
-# nothing if the files are already there. Exit status 1, DIR untouched, when the package cannot
+# nothing if the files are already there. A non-zero exit status, DIR untouched, when the package cannot
 # be downloaded or lacks a file.
 set -eu
 cd "$(dirname "$0")/.."
