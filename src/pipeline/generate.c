@@ -22,7 +22,7 @@
 #include <string.h>
 #include <sys/resource.h>
 
-#define G3D_MOVE_STEPS 4   /* generation steps of a keyframed preset */
+#define G3D_MOVE_STEPS 2   /* generation steps of a keyframed preset */
 
 static const char *const g_stage_names[G3D_STAGE_COUNT] = {"input", "layers", "world", "splats", "outputs"};
 
@@ -44,7 +44,7 @@ void g3d_generate_params_default(g3d_generate_params *p)
     /* The keyframed presets (WorldScore's moves) make 50 frames for a video; as generation
      * steps those move 7 mm each on the default input, and each step inpaints and lifts holes a
      * pixel or two wide at every depth edge, whose mixed colours then sit beside the edges at
-     * any camera along the path (docs/splatting.md). */
+     * any camera along the path (docs/splatting.md: fewer, wider steps score better). */
     p->trajectory_params.interp = G3D_MOVE_STEPS - 1;
     g3d_world_params_default(&p->world);
     p->sh_degree = 3;
