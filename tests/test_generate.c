@@ -1,6 +1,7 @@
 /* The pipeline in the library (generate.h) on the procedural room: the result and the files
  * agree, a cancelled run stops with its own status and leaves nothing, a run can stop after
- * the world and a later one can train on that folder, bad parameters fail before any work. */
+ * the world and a later one can train on that folder, a moving preset takes the steps it should,
+ * bad parameters fail before any work. */
 #include "testutil.h"
 #include "gen3d/generate.h"
 #include "gen3d/init.h"
@@ -173,6 +174,39 @@ TEST(world_folder_then_splats)
     g3d_frame_free(&f);
 }
 
+/* A keyframed preset takes 2 generation steps by default, not its video's 50 frames, and
+ * --steps N makes exactly N + 1 evenly spaced poses of it. */
+TEST(moving_preset_steps)
+{
+    g3d_frame f;
+    make_frame(&f, 64, 48);
+    const char *world = test_tmp("generate_move_right");
+    const int steps[2] = {0, 8}, views[2] = {3, 9};
+    for (int k = 0; k < 2; k++) {
+        g3d_generate_params p;
+        small_params(&p, &f, world);
+        p.trajectory = "move_right";
+        p.trajectory_params.distance = 0.4;  /* the preset moves half of it: 0.2 m */
+        p.steps = steps[k];
+        p.world.extra_views = 0;
+        p.last_stage = G3D_STAGE_WORLD;
+        g3d_generate_result r;
+        CHECK_OK(g3d_generate(&p, &r));
+        CHECK(r.views == views[k]);
+        g3d_generate_result_free(&r);
+        char path[1200];
+        snprintf(path, sizeof path, "%s/cameras.json", world);
+        g3d_camera_list l;
+        CHECK_OK(g3d_camera_list_load(path, &l));
+        CHECK(l.n == views[k]);
+        for (int i = 0; i < l.n && l.n == views[k]; i++)
+            CHECK_NEAR(g3d_v3_norm(g3d_v3_sub(g3d_mat4_translation(l.cams[i].c2w), g3d_mat4_translation(l.cams[0].c2w))),
+                       0.2 * i / (views[k] - 1), 1e-6);
+        g3d_camera_list_free(&l);
+    }
+    g3d_frame_free(&f);
+}
+
 TEST(refusals_before_work)
 {
     g3d_frame f;
@@ -210,6 +244,7 @@ int main(int argc, char **argv)
     RUN(result_and_files_agree);
     RUN(cancelling_leaves_nothing);
     RUN(world_folder_then_splats);
+    RUN(moving_preset_steps);
     RUN(refusals_before_work);
     return test_summary();
 }

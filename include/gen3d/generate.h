@@ -135,7 +135,8 @@ typedef struct g3d_generate_params {
     g3d_layers_params layers_params;
     /* ---- world ---- */
     const char *trajectory;           /* a preset (trajectory.h) or a camera file ("rotate") */
-    g3d_trajectory_params trajectory_params;
+    g3d_trajectory_params trajectory_params;  /* interp 1: a keyframed preset (push_in ..
+                                         pan_right) makes 2 steps, not its video's 50 frames */
     int steps;                        /* generation steps after the input; a preset or file of
                                          another length is picked down or up to steps + 1 poses
                                          (g3d_trajectory_pick); 0: as it is */

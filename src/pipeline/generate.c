@@ -22,6 +22,8 @@
 #include <string.h>
 #include <sys/resource.h>
 
+#define G3D_MOVE_STEPS 2   /* generation steps of a keyframed preset */
+
 static const char *const g_stage_names[G3D_STAGE_COUNT] = {"input", "layers", "world", "splats", "outputs"};
 
 const char *g3d_stage_name(g3d_stage s)
@@ -39,6 +41,11 @@ void g3d_generate_params_default(g3d_generate_params *p)
     g3d_layers_params_default(&p->layers_params);
     p->trajectory = "rotate";
     g3d_trajectory_params_default(&p->trajectory_params);
+    /* The keyframed presets (WorldScore's moves) make 50 frames for a video; as generation
+     * steps those move 7 mm each on the default input, and each step inpaints and lifts holes a
+     * pixel or two wide at every depth edge, whose mixed colours then sit beside the edges at
+     * any camera along the path (docs/splatting.md: fewer, wider steps score better). */
+    p->trajectory_params.interp = G3D_MOVE_STEPS - 1;
     g3d_world_params_default(&p->world);
     p->sh_degree = 3;
     g3d_footprint_init_default(&p->footprint);
@@ -454,6 +461,9 @@ static g3d_status make_poses(const g3d_generate_params *p, const g3d_frame *f, g
     } else {
         g3d_trajectory_params tp = p->trajectory_params;
         if (p->steps > 0 && !strcmp(p->trajectory, "rotate")) tp.steps = p->steps;
+        /* a keyframed preset then makes exactly those poses, evenly spaced (the pick below
+         * would repeat poses to go beyond the preset's count) */
+        if (p->steps > 0 && p->steps <= 1001) tp.interp = p->steps - 1;
         rc = g3d_trajectory_make(p->trajectory, &tp, g3d_depth_median(&f->depth), poses, n);
     }
     if (rc == G3D_OK && p->steps > 0 && p->steps + 1 != *n) {

@@ -15,7 +15,7 @@ typedef struct g3d_cli_world {
 
 #define G3D_WORLD_OPTS(w)                                                                                         \
     {0, "trajectory", G3D_OPT_TRAJECTORY, &(w)->trajectory, "NAME|FILE", "camera path preset or pose file"},             \
-    {0, "steps", G3D_OPT_INT, &(w)->steps, "N", "generation steps after the input (0: the preset's own count)"},     \
+    {0, "steps", G3D_OPT_INT, &(w)->steps, "N", "generation steps after the input (0: the preset's own count; 2 for a moving preset)"},     \
     {0, "angle", G3D_OPT_DOUBLE, &(w)->angle, "DEG", "rotate: total yaw (0: 60 degrees)"},                            \
     {0, "distance", G3D_OPT_DOUBLE, &(w)->distance, "M", "moving presets: distance in metres (0: a quarter of the median depth)"}, \
     {0, "extra", G3D_OPT_INT, &(w)->extra, "M", "extra training views rendered from the final cloud"},               \
