@@ -212,6 +212,7 @@ TEST(side_steps_fill_only_what_the_path_left)
     wp.extra_views = 3;
     wp.side_from = 2;
     wp.side_max_side = 48;
+    wp.side_carve = 0.02;
     g3d_world w, path;
     CHECK_OK(g3d_world_generate(&f, poses, 5, &ip, &de, NULL, &wp, 3, &w));
     wp.side_from = 0;

@@ -409,7 +409,7 @@ static g3d_status stage_layers(run *r)
 /* Generation steps at the exploration set's cameras (all but the input's own), after the
  * trajectory: a rotation reveals nothing behind the input's depth edges, and the set's
  * steps and turns do, so their holes are inpainted and lifted, as the world's side steps
- * (world.h: at a lower resolution, not where the path saw through). */
+ * (world.h: at a lower resolution). */
 static g3d_status append_explore_poses(const g3d_generate_params *p, const g3d_frame *f, g3d_mat4 **poses, int *n)
 {
     g3d_camera origin = {f->cam.K, g3d_mat4_identity()}, *cams;

@@ -20,7 +20,6 @@ void g3d_world_params_default(g3d_world_params *p)
     p->extra_angle_deg = 5.0;
     p->hole_stride = 2;
     p->side_max_side = 384;
-    p->side_carve = 0.02;
     g3d_cloud_render_params_default(&p->render);
     g3d_align_params_default(&p->align);
 }
@@ -173,7 +172,7 @@ static g3d_status world_step(g3d_world *w, int i, const g3d_inpainter *inpaint, 
     /* The view keeps the cloud's depth where the cloud covered it: only the holes are new. */
     for (size_t k = 0; k < n; k++) if (mask.data[k] >= 0.5f) est.data[k] = cloud_d.data[k];
     t = g3d_time_now();
-    if (nh && p->side_from > 0 && i >= p->side_from) carve_seen(w, p->side_from, cam, &est, p->side_carve, &holes);
+    if (nh && p->side_carve > 0 && p->side_from > 0 && i >= p->side_from) carve_seen(w, p->side_from, cam, &est, p->side_carve, &holes);
     if (nh) rc = g3d_cloud_lift_sparse(&w->cloud, &rgb, &est, cam, &holes, i, p->hole_stride, &st->points_added);
     st->seconds_lift = g3d_time_now() - t;
     if (rc != G3D_OK) goto done;
