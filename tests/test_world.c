@@ -191,11 +191,81 @@ TEST(bad_trajectories)
     g3d_frame_free(&f);
 }
 
+/* Side steps (the exploration set's in g3d_generate): at most side_max_side pixels, no hole
+ * point lifted where the input saw through it, extra views around the path only, and bad
+ * side-step parameters refused. */
+TEST(side_steps_fill_only_what_the_path_left)
+{
+    g3d_frame f;
+    make_frame(&f, 96, 72);
+    g3d_inpainter ip;
+    g3d_depth_estimator de;
+    g3d_depth_estimator_completion_create(&de);
+    g3d_inpainter_classic_create(NULL, &ip);
+    double d = 0.25 * g3d_depth_median(&f.depth);
+    /* the input, a turn (the path), then steps sideways and forward with turns */
+    g3d_mat4 poses[5] = {g3d_mat4_identity(), g3d_pose_yaw_pitch(15, 0, g3d_v3(0, 0, 0)),
+                         g3d_pose_yaw_pitch(-15, 0, g3d_v3(d, 0, 0)), g3d_pose_yaw_pitch(15, 10, g3d_v3(-d, 0, d)),
+                         g3d_pose_yaw_pitch(0, -10, g3d_v3(0, 0.5 * d, 2 * d))};
+    g3d_world_params wp;
+    g3d_world_params_default(&wp);
+    wp.extra_views = 3;
+    wp.side_from = 2;
+    wp.side_max_side = 48;
+    wp.side_carve = 0.02;
+    g3d_world w, path;
+    CHECK_OK(g3d_world_generate(&f, poses, 5, &ip, &de, NULL, &wp, 3, &w));
+    wp.side_from = 0;
+    CHECK_OK(g3d_world_generate(&f, poses, 2, &ip, &de, NULL, &wp, 3, &path));
+    if (w.n_views == 5 && path.n_views == 2) {
+        for (int i = 0; i < 5; i++) {
+            int side = i >= 2;
+            CHECK(w.cams[i].K.width == (side ? 48 : 96) && w.cams[i].K.height == (side ? 36 : 72));
+            CHECK(w.rgb[i].w == w.cams[i].K.width && w.depth[i].h == w.cams[i].K.height);
+        }
+        /* the extra views orbit the path's poses, as without the side steps */
+        CHECK(w.n_extra == 3 && path.n_extra == 3);
+        for (int k = 0; k < w.n_extra && k < path.n_extra; k++)
+            CHECK(g3d_mat4_max_abs_diff(w.extra_cams[k].c2w, path.extra_cams[k].c2w) < 1e-12);
+        /* every point a side step lifted lies behind the depth of the path views that see it */
+        int64_t lifted = 0, seen_through = 0;
+        for (int64_t k = 0; k < w.cloud.n; k++) {
+            if (w.cloud.view[k] < 2) continue;
+            lifted++;
+            g3d_vec3 x = g3d_v3(w.cloud.xyz[3 * k], w.cloud.xyz[3 * k + 1], w.cloud.xyz[3 * k + 2]);
+            for (int j = 0; j < 2; j++) {
+                double u, v, z;
+                if (!g3d_camera_project(&w.cams[j], x, &u, &v, &z)) continue;
+                long iu = lround(u), iv = lround(v);
+                if (iu < 0 || iv < 0 || iu >= w.depth[j].w || iv >= w.depth[j].h) continue;
+                float dz = w.depth[j].data[iv * w.depth[j].w + iu];
+                seen_through += dz > 0 && z < dz * (1 - wp.side_carve) - 1e-6;
+            }
+        }
+        printf("  side steps: %lld points lifted, %lld seen through by the path\n", (long long)lifted, (long long)seen_through);
+        CHECK(lifted > 0);
+        CHECK(seen_through == 0);
+    }
+    g3d_world_free(&w);
+    g3d_world_free(&path);
+    wp.side_from = 2;
+    wp.side_max_side = 8;
+    CHECK_FAILS(g3d_world_generate(&f, poses, 5, &ip, &de, NULL, &wp, 3, &w));
+    wp.side_max_side = 48;
+    wp.side_carve = -0.1;
+    CHECK_FAILS(g3d_world_generate(&f, poses, 5, &ip, &de, NULL, &wp, 3, &w));
+    wp.side_carve = NAN;
+    CHECK_FAILS(g3d_world_generate(&f, poses, 5, &ip, &de, NULL, &wp, 3, &w));
+    g3d_inpainter_free(&ip);
+    g3d_frame_free(&f);
+}
+
 int main(void)
 {
     RUN(grows_the_scene_consistently);
     RUN(deterministic_dataset);
     RUN(world_folder_round_trip);
     RUN(bad_trajectories);
+    RUN(side_steps_fill_only_what_the_path_left);
     return test_summary();
 }

@@ -142,9 +142,10 @@ typedef struct g3d_generate_params {
                                          (g3d_trajectory_pick); 0: as it is */
     g3d_world_params world;
     int explore_views;                /* 1: after the trajectory, generation steps at the
-                                         exploration set's cameras (`explore` below), so that
-                                         what they see behind depth edges is filled (default 0:
-                                         they cost held-out fidelity, docs/explore.md) */
+                                         exploration set's cameras (`explore` below) as the
+                                         world's side steps (world.side_max_side, side_carve),
+                                         so that what they see behind depth edges is filled
+                                         (default 0: they cost held-out fidelity, docs/explore.md) */
     /* ---- splats ---- */
     int sh_degree;                    /* 0..3 (3) */
     int knn_init;                     /* 1: Gaussians start as the Inria recipe (isotropic, 3-NN

@@ -428,7 +428,8 @@ static g3d_status stage_layers(run *r)
 
 /* Generation steps at the exploration set's cameras (all but the input's own), after the
  * trajectory: a rotation reveals nothing behind the input's depth edges, and the set's
- * steps and turns do, so their holes are inpainted and lifted like any step's. */
+ * steps and turns do, so their holes are inpainted and lifted, as the world's side steps
+ * (world.h: at a lower resolution). */
 static g3d_status append_explore_poses(const g3d_generate_params *p, const g3d_frame *f, g3d_mat4 **poses, int *n)
 {
     g3d_camera origin = {f->cam.K, g3d_mat4_identity()}, *cams;
@@ -446,8 +447,9 @@ static g3d_status append_explore_poses(const g3d_generate_params *p, const g3d_f
 }
 
 /* The trajectory's poses: a camera file, or a preset scaled by the input's median depth;
- * then picked to steps + 1 poses when steps is given. */
-static g3d_status make_poses(const g3d_generate_params *p, const g3d_frame *f, g3d_mat4 **poses, int *n)
+ * then picked to steps + 1 poses when steps is given (*n_path of them); then, with
+ * explore_views, the exploration set's cameras. */
+static g3d_status make_poses(const g3d_generate_params *p, const g3d_frame *f, g3d_mat4 **poses, int *n, int *n_path)
 {
     g3d_status rc;
     *poses = NULL;
@@ -475,6 +477,7 @@ static g3d_status make_poses(const g3d_generate_params *p, const g3d_frame *f, g
             *n = p->steps + 1;
         }
     }
+    *n_path = *n;
     if (rc == G3D_OK && p->explore_views) rc = append_explore_poses(p, f, poses, n);
     if (rc != G3D_OK) {
         free(*poses);
@@ -495,9 +498,10 @@ static g3d_status stage_world(run *r)
     }
     const g3d_frame *f = r->input;
     g3d_mat4 *poses;
-    int n;
-    G3D_TRY(make_poses(p, f, &poses, &n));
+    int n, n_path;
+    G3D_TRY(make_poses(p, f, &poses, &n, &n_path));
     g3d_world_params wp = p->world;
+    wp.side_from = n_path < n ? n_path : 0;
     wp.progress = r->progress;
     if (r->prompts && !p->layers)
         G3D_TRY(r->prompts->prompt(r->prompts->ctx, &f->rgb, NULL, &r->bg_prompt, &r->view_prompt));

@@ -19,6 +19,7 @@ void g3d_world_params_default(g3d_world_params *p)
     p->extra_views = 10;
     p->extra_angle_deg = 5.0;
     p->hole_stride = 2;
+    p->side_max_side = 384;
     g3d_cloud_render_params_default(&p->render);
     g3d_align_params_default(&p->align);
 }
@@ -102,6 +103,40 @@ static g3d_status lift_input(g3d_world *w, const g3d_frame *in, const g3d_depth_
     return g3d_image_clone(&w->depth[0], &in->depth);
 }
 
+/* A side step's hole pixels whose point (at `depth` in cam) one of the first n_path views sees
+ * in front of its own surface, by more than tol of that view's depth, are cleared: that view
+ * saw through the point, so it is an inpainted guess (mostly beside thin structures and object
+ * borders, where the aligned depth of a hole bleeds between foreground and background) that
+ * would hide what the path saw. */
+static void carve_seen(const g3d_world *w, int n_path, const g3d_camera *cam, const g3d_image *depth, double tol,
+                       g3d_image *holes)
+{
+    for (int j = 0; j < n_path; j++) {
+        const g3d_image *dj = &w->depth[j];
+        for (int y = 0; y < holes->h; y++)
+            for (int x = 0; x < holes->w; x++) {
+                size_t k = (size_t)y * holes->w + x;
+                double u, v, z;
+                if (!(holes->data[k] > 0.5f) || !(depth->data[k] > 0)) continue;
+                if (!g3d_camera_project(&w->cams[j], g3d_camera_unproject(cam, x, y, depth->data[k]), &u, &v, &z)) continue;
+                long iu = lround(u), iv = lround(v);
+                if (iu < 0 || iv < 0 || iu >= dj->w || iv >= dj->h) continue;
+                float dz = dj->data[(size_t)iv * dj->w + iu];
+                if (dz > 0 && z < dz * (1 - tol)) holes->data[k] = 0;
+            }
+    }
+}
+
+/* The input's intrinsics, downscaled to a longer side of at most max_side. */
+static g3d_intrinsics side_intrinsics(g3d_intrinsics K, int max_side)
+{
+    int side = K.width > K.height ? K.width : K.height;
+    if (side <= max_side) return K;
+    double f = (double)max_side / side;
+    int w = (int)lround(K.width * f), h = (int)lround(K.height * f);
+    return g3d_intrinsics_resize(K, w > 1 ? w : 1, h > 1 ? h : 1);
+}
+
 /* One generation step at pose i. */
 static g3d_status world_step(g3d_world *w, int i, const g3d_inpainter *inpaint, const g3d_depth_estimator *depth,
                              const g3d_world_params *p, uint64_t seed)
@@ -137,6 +172,7 @@ static g3d_status world_step(g3d_world *w, int i, const g3d_inpainter *inpaint, 
     /* The view keeps the cloud's depth where the cloud covered it: only the holes are new. */
     for (size_t k = 0; k < n; k++) if (mask.data[k] >= 0.5f) est.data[k] = cloud_d.data[k];
     t = g3d_time_now();
+    if (nh && p->side_carve > 0 && p->side_from > 0 && i >= p->side_from) carve_seen(w, p->side_from, cam, &est, p->side_carve, &holes);
     if (nh) rc = g3d_cloud_lift_sparse(&w->cloud, &rgb, &est, cam, &holes, i, p->hole_stride, &st->points_added);
     st->seconds_lift = g3d_time_now() - t;
     if (rc != G3D_OK) goto done;
@@ -163,6 +199,11 @@ g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int
     if (n_poses < 1 || n_poses > 10000) return G3D_ERR(G3D_ERR_ARG, "world: %d poses (need 1..10000)", n_poses);
     if (p->hole_stride < 1 || p->hole_stride > 16) return G3D_ERR(G3D_ERR_ARG, "world: hole stride %d (need 1..16)", p->hole_stride);
     if (p->extra_views < 0 || p->extra_views > 10000) return G3D_ERR(G3D_ERR_ARG, "world: %d extra views (need 0..10000)", p->extra_views);
+    if (p->side_max_side < 16) return G3D_ERR(G3D_ERR_ARG, "world: side steps' longer side %d (need >= 16)", p->side_max_side);
+    if (!(p->side_carve >= 0 && p->side_carve <= 1))
+        return G3D_ERR(G3D_ERR_ARG, "world: side-step carving tolerance %g (need 0..1)", p->side_carve);
+    /* the path: the poses before the side steps */
+    const int n_path = p->side_from > 0 && p->side_from < n_poses ? p->side_from : n_poses;
     G3D_TRY(g3d_frame_validate(input, input->name[0] ? input->name : "input"));
     g3d_status rc = g3d_cloud_init(&out->cloud);
     out->cams = calloc((size_t)n_poses, sizeof *out->cams);
@@ -172,7 +213,7 @@ g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int
     if (rc == G3D_OK && (!out->cams || !out->rgb || !out->depth || !out->steps)) rc = G3D_ERR(G3D_ERR_NOMEM, "world: out of memory");
     out->n_views = n_poses;
     for (int i = 0; i < n_poses && rc == G3D_OK; i++) {
-        out->cams[i].K = input->cam.K;
+        out->cams[i].K = i < n_path ? input->cam.K : side_intrinsics(input->cam.K, p->side_max_side);
         out->cams[i].c2w = g3d_mat4_mul(input->cam.c2w, poses[i]);
     }
     if (rc == G3D_OK) rc = lift_input(out, input, depth, layers, p);
@@ -185,14 +226,14 @@ g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int
         if (rc == G3D_OK && g3d_progress_report(&p->progress, "world", i + 1, n_poses, info))
             rc = G3D_ERR(G3D_CANCELLED, "world generation cancelled");
     }
-    /* Extra views: orbits around the poses, rendered from the final cloud, not inpainted. */
+    /* Extra views: orbits around the path's poses, rendered from the final cloud, not inpainted. */
     if (rc == G3D_OK && p->extra_views > 0) {
-        int per = (p->extra_views + n_poses - 1) / n_poses;
+        int per = (p->extra_views + n_path - 1) / n_path;
         if (per > 5) per = 5;
         g3d_mat4 *orb = NULL;
         int norb = 0;
         double pivot = g3d_depth_median(&input->depth);
-        rc = g3d_trajectory_orbits(poses, n_poses, per, pivot > 0 ? pivot : 1.0, p->extra_angle_deg, &orb, &norb);
+        rc = g3d_trajectory_orbits(poses, n_path, per, pivot > 0 ? pivot : 1.0, p->extra_angle_deg, &orb, &norb);
         int m = p->extra_views < norb ? p->extra_views : norb;
         if (rc == G3D_OK) {
             out->extra_cams = calloc((size_t)(m ? m : 1), sizeof *out->extra_cams);
@@ -202,7 +243,7 @@ g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int
         }
         for (int k = 0; k < m && rc == G3D_OK; k++) {
             /* Spread the views over the poses: pose k % n, orbit k / n. */
-            int pose = k % n_poses, j = k / n_poses;
+            int pose = k % n_path, j = k / n_path;
             out->extra_cams[k].K = input->cam.K;
             out->extra_cams[k].c2w = g3d_mat4_mul(input->cam.c2w, orb[pose * per + j]);
             rc = g3d_cloud_render(&out->cloud, &out->extra_cams[k], &p->render, &out->extra_rgb[k], NULL, &out->extra_mask[k]);
