@@ -51,6 +51,10 @@ g3d_status g3d_resize_buffer(const float *src, int sw, int sh, int c, float *dst
  * dst (dh, dw, c) caller-allocated. */
 g3d_status g3d_resize_u8_pil_bicubic(const uint8_t *src, int sw, int sh, int c, uint8_t *dst, int dw, int dh);
 
+/* The size (*ow, *oh) of a w x h picture scaled so that its longer side is max_side, each side
+ * rounded to the nearest pixel and at least 1 (the size of a frame limited to max_side). */
+void g3d_fit_size(int w, int h, int max_side, int *ow, int *oh);
+
 /* Resizes src into a new image *dst of dw x dh (same channels). */
 g3d_status g3d_image_resize(const g3d_image *src, int dw, int dh, g3d_resize_mode mode, g3d_image *dst);
 

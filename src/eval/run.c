@@ -86,9 +86,8 @@ typedef struct sheet {
 
 static g3d_status sheet_begin(sheet *s, int w, int h, int rows)
 {
-    const double k = fmin(1.0, (double)SHEET_PANEL_MAX / (w > h ? w : h));
-    s->pw = (int)fmax(1, lround(w * k));
-    s->ph = (int)fmax(1, lround(h * k));
+    s->pw = w, s->ph = h;
+    if (w > SHEET_PANEL_MAX || h > SHEET_PANEL_MAX) g3d_fit_size(w, h, SHEET_PANEL_MAX, &s->pw, &s->ph);
     s->rows = 0;
     G3D_TRY(g3d_image_create(&s->img, 3 * s->pw + 2 * SHEET_GAP, rows * s->ph + (rows - 1) * SHEET_GAP, 3));
     for (size_t i = 0; i < g3d_image_size(&s->img); i++) s->img.data[i] = 1.0f;

@@ -97,8 +97,8 @@ static g3d_status limit_size(g3d_eval_view *v, int max_side)
 {
     const int w = v->cam.K.width, h = v->cam.K.height;
     if (max_side <= 0 || (w <= max_side && h <= max_side)) return G3D_OK;
-    const double s = (double)max_side / (w > h ? w : h);
-    const int nw = (int)fmax(1, lround(w * s)), nh = (int)fmax(1, lround(h * s));
+    int nw, nh;
+    g3d_fit_size(w, h, max_side, &nw, &nh);
     g3d_image *imgs[3] = {&v->rgb, &v->depth, &v->mask};
     for (int k = 0; k < 3; k++) {
         if (!imgs[k]->data) continue;

@@ -60,8 +60,6 @@ static g3d_intrinsics given_camera(g3d_intrinsics K, double fov_deg, int w, int 
 }
 
 static g3d_status resize_in_place(g3d_image *img, int w, int h, g3d_resize_mode mode);
-static void scaled_size(int w, int h, int max_side, int *ow, int *oh);
-
 g3d_status g3d_frame_load_rgb(const char *rgb_path, const g3d_depth_estimator *model, g3d_intrinsics K, double fov_deg,
                               int max_side, g3d_frame *f)
 {
@@ -85,7 +83,7 @@ g3d_status g3d_frame_from_image(g3d_image *rgb, const char *label, const g3d_dep
     int w0 = f->rgb.w, h0 = f->rgb.h;
     if (max_side > 0 && (w0 > max_side || h0 > max_side)) {
         int w, h;
-        scaled_size(w0, h0, max_side, &w, &h);
+        g3d_fit_size(w0, h0, max_side, &w, &h);
         if ((rc = resize_in_place(&f->rgb, w, h, G3D_RESIZE_AREA)) != G3D_OK) { g3d_frame_free(f); return rc; }
         if (K.fx > 0) {
             double sx = (double)w / w0, sy = (double)h / h0;
@@ -282,27 +280,18 @@ static g3d_status resize_in_place(g3d_image *img, int w, int h, g3d_resize_mode 
     return G3D_OK;
 }
 
-static void scaled_size(int w, int h, int max_side, int *ow, int *oh)
-{
-    double s = (double)max_side / (w > h ? w : h);
-    *ow = (int)lround(w * s);
-    *oh = (int)lround(h * s);
-    if (*ow < 1) *ow = 1;
-    if (*oh < 1) *oh = 1;
-}
-
 g3d_status g3d_frame_limit_size(g3d_frame *f, int max_side)
 {
     int w, h;
     if (max_side < 16) return G3D_ERR(G3D_ERR_ARG, "maximum image side %d is too small (at least 16)", max_side);
     if (f->rgb.w > max_side || f->rgb.h > max_side) {
-        scaled_size(f->rgb.w, f->rgb.h, max_side, &w, &h);
+        g3d_fit_size(f->rgb.w, f->rgb.h, max_side, &w, &h);
         G3D_TRY(resize_in_place(&f->rgb, w, h, G3D_RESIZE_AREA));
         G3D_TRY(resize_in_place(&f->depth, w, h, G3D_RESIZE_NEAREST));
         f->cam.K = g3d_intrinsics_resize(f->cam.K, w, h);
     }
     if (f->heldout.data && (f->heldout.w > max_side || f->heldout.h > max_side)) {
-        scaled_size(f->heldout.w, f->heldout.h, max_side, &w, &h);
+        g3d_fit_size(f->heldout.w, f->heldout.h, max_side, &w, &h);
         G3D_TRY(resize_in_place(&f->heldout, w, h, G3D_RESIZE_AREA));
         f->heldout_cam.K = g3d_intrinsics_resize(f->heldout_cam.K, w, h);
     }

@@ -152,6 +152,15 @@ g3d_status g3d_resize_buffer(const float *src, int sw, int sh, int c, float *dst
     return G3D_OK;
 }
 
+void g3d_fit_size(int w, int h, int max_side, int *ow, int *oh)
+{
+    double s = (double)max_side / (w > h ? w : h);
+    *ow = (int)lround(w * s);
+    *oh = (int)lround(h * s);
+    if (*ow < 1) *ow = 1;
+    if (*oh < 1) *oh = 1;
+}
+
 g3d_status g3d_image_resize(const g3d_image *src, int dw, int dh, g3d_resize_mode mode, g3d_image *dst)
 {
     G3D_TRY(g3d_image_create(dst, dw, dh, src->c));

@@ -4,6 +4,7 @@
 #include "gen3d/depthio.h"
 #include "gen3d/imageio.h"
 #include "gen3d/npy.h"
+#include "gen3d/resize.h"
 #include "gen3d/trajectory.h"
 
 #include <cjson/cJSON.h>
@@ -130,11 +131,10 @@ static void carve_seen(const g3d_world *w, int n_path, const g3d_camera *cam, co
 /* The input's intrinsics, downscaled to a longer side of at most max_side. */
 static g3d_intrinsics side_intrinsics(g3d_intrinsics K, int max_side)
 {
-    int side = K.width > K.height ? K.width : K.height;
-    if (side <= max_side) return K;
-    double f = (double)max_side / side;
-    int w = (int)lround(K.width * f), h = (int)lround(K.height * f);
-    return g3d_intrinsics_resize(K, w > 1 ? w : 1, h > 1 ? h : 1);
+    if (K.width <= max_side && K.height <= max_side) return K;
+    int w, h;
+    g3d_fit_size(K.width, K.height, max_side, &w, &h);
+    return g3d_intrinsics_resize(K, w, h);
 }
 
 /* One generation step at pose i. */
