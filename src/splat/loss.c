@@ -326,7 +326,7 @@ static g3d_status job_alloc(loss_job *jb, int with_weights)
     if (!jb->scratch || !jb->row_l1) {
         free(jb->scratch);
         free(jb->row_l1);
-        return G3D_ERR_NOMEM;
+        return G3D_ERR(G3D_ERR_NOMEM, "loss: out of memory for a %dx%d image's scratch", jb->w, jb->h);
     }
     jb->wts = with_weights ? jb->scratch + nt * per : NULL;
     for (size_t row = 0; with_weights && row < (size_t)BWD_PLANES * jb->h; row++) {
