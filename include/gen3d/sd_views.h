@@ -47,6 +47,9 @@ typedef struct g3d_sd_view_params {
 /* Fills the defaults above. */
 void g3d_sd_view_params_default(g3d_sd_view_params *p);
 
+/* G3D_OK when the size is in 8..4096 and the dilation in 0..64; else G3D_ERR_ARG saying which. */
+g3d_status g3d_sd_view_params_check(const g3d_sd_view_params *p);
+
 /* The picture size for a w x h view: the view scaled to dw x dh (its longer side `size` rounded
  * down to a multiple of `multiple`, at least one multiple; the other side in proportion,
  * rounded), then padded to pw x ph, the next multiples of `multiple`. */

@@ -31,8 +31,11 @@ typedef struct g3d_trajectory_params {
     int steps;          /* rotate: poses after the input (0 = default 8) */
     double angle_deg;   /* rotate: total yaw (0 = default 60) */
     double distance;    /* metres for moving presets; <= 0: 0.25 x scene scale */
-    int interp;         /* interpolated poses between keyframes (-1 = preset default) */
+    int interp;         /* interpolated poses between keyframes (-1 = preset default), at most
+                           G3D_TRAJECTORY_MAX_INTERP */
 } g3d_trajectory_params;
+
+#define G3D_TRAJECTORY_MAX_INTERP 1000
 
 /* Fills the defaults above. */
 void g3d_trajectory_params_default(g3d_trajectory_params *p);

@@ -83,7 +83,7 @@ g3d_status g3d_trajectory_make(const char *name, const g3d_trajectory_params *p,
     double s = p->distance > 0 ? p->distance : 0.25 * scene_scale;
     int interp = p->interp >= 0 ? p->interp : 48;
     if (p->steps < 0 || p->steps > 1000) return G3D_ERR(G3D_ERR_ARG, "trajectory: steps %d out of range 0..1000", p->steps);
-    if (interp > 1000) return G3D_ERR(G3D_ERR_ARG, "trajectory: %d interpolated poses is too many", interp);
+    if (interp > G3D_TRAJECTORY_MAX_INTERP) return G3D_ERR(G3D_ERR_ARG, "trajectory: %d interpolated poses is too many", interp);
 
     if (!strcmp(name, "rotate")) {
         int steps = p->steps ? p->steps : 8;

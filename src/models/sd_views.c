@@ -19,6 +19,13 @@ void g3d_sd_view_params_default(g3d_sd_view_params *p)
     p->dilate = 4;
 }
 
+g3d_status g3d_sd_view_params_check(const g3d_sd_view_params *p)
+{
+    if (p->size < 8 || p->size > 4096 || p->dilate < 0 || p->dilate > 64)
+        return G3D_ERR(G3D_ERR_ARG, "diffusion inpainting: size %d (need 8..4096) or dilation %d (need 0..64)", p->size, p->dilate);
+    return G3D_OK;
+}
+
 void g3d_sd_view_geometry(int w, int h, int size, int multiple, int *dw, int *dh, int *pw, int *ph)
 {
     int side = size / multiple * multiple;
@@ -134,9 +141,10 @@ g3d_status g3d_inpainter_sd_views_create(g3d_sd *model, const g3d_sd_view_params
     g3d_sd_view_params d;
     g3d_sd_view_params_default(&d);
     if (!p) p = &d;
-    if (p->size < 8 || p->size > 4096 || p->dilate < 0 || p->dilate > 64) {
+    g3d_status rc = g3d_sd_view_params_check(p);
+    if (rc != G3D_OK) {
         g3d_sd_free(model);
-        return G3D_ERR(G3D_ERR_ARG, "diffusion inpainting: size %d (need 8..4096) or dilation %d (need 0..64)", p->size, p->dilate);
+        return rc;
     }
     views *v = calloc(1, sizeof *v);
     if (!v) {

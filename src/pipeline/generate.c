@@ -154,10 +154,7 @@ static g3d_status check_params(const g3d_generate_params *p)
     }
     if (p->controlnet_model && !p->bg_inpainter && !p->inpaint_model)
         return G3D_ERR(G3D_ERR_ARG, "%s: the ControlNet needs its base model: give an inpainting model", p->controlnet_model);
-    if ((p->sd_model || p->inpaint_model || p->controlnet_model) &&
-        (p->diffusion.size < 8 || p->diffusion.size > 4096 || p->diffusion.dilate < 0 || p->diffusion.dilate > 64))
-        return G3D_ERR(G3D_ERR_ARG, "generate: diffusion size %d (need 8..4096) or dilation %d (need 0..64)", p->diffusion.size,
-                       p->diffusion.dilate);
+    if (p->sd_model || p->inpaint_model || p->controlnet_model) G3D_TRY(g3d_sd_view_params_check(&p->diffusion));
     if (p->last_stage == G3D_STAGE_OUTPUTS && p->output_dir && p->video) {
         if (p->video_frames < 2) return G3D_ERR(G3D_ERR_ARG, "generate: a video needs 2 frames at least, not %d", p->video_frames);
         g3d_camera probe = {g3d_intrinsics_from_fov(60, 64, 48), g3d_mat4_identity()}, *cams = NULL;
@@ -465,7 +462,7 @@ static g3d_status make_poses(const g3d_generate_params *p, const g3d_frame *f, g
         if (p->steps > 0 && !strcmp(p->trajectory, "rotate")) tp.steps = p->steps;
         /* a keyframed preset then makes exactly those poses, evenly spaced (the pick below
          * would repeat poses to go beyond the preset's count) */
-        if (p->steps > 0 && p->steps <= 1001) tp.interp = p->steps - 1;
+        if (p->steps > 0 && p->steps - 1 <= G3D_TRAJECTORY_MAX_INTERP) tp.interp = p->steps - 1;
         rc = g3d_trajectory_make(p->trajectory, &tp, g3d_depth_median(&f->depth), poses, n);
     }
     if (rc == G3D_OK && p->steps > 0 && p->steps + 1 != *n) {
