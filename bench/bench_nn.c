@@ -2,7 +2,9 @@
  * arithmetic rate, and that rate as a fraction of the machine's sgemm rate (OpenBLAS, 1536^3,
  * its own threads, the same thread count) measured in the same run: sgemm and the operator run
  * in alternation and the fraction is the median over rounds of operator rate / the sgemm rate
- * just before it, because a shared machine's speed drifts within seconds.
+ * just before it, because a shared machine's speed drifts within seconds. Both sides are timed
+ * on their own: OpenBLAS's threads are told to sleep as soon as a call ends and each part starts
+ * after a short pause, so neither side's idle threads spin on the cores while the other runs.
  *   cmake --build build --target bench && ./build/bench_nn [filter] [--reps N]
  * `filter` keeps the cases whose name contains it. Work counts are multiply-adds x 2 of the
  * operator's definition (also for Winograd, which does fewer). A last table sums up per op
@@ -15,6 +17,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
+#include <unistd.h>
 
 static int g_reps = 5, g_threads;
 static const char *g_filter;
@@ -67,8 +71,24 @@ static int cmp_double(const void *a, const void *b)
     return x < y ? -1 : x > y;
 }
 
+static double cpu_now(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+    return t.tv_sec + 1e-9 * t.tv_nsec;
+}
+
+/* Idle OpenMP threads spin for a few milliseconds before they sleep (libgomp's default); a
+ * pause before each timed part keeps the previous part's threads off the cores. */
+static void settle(void)
+{
+    struct timespec t = {0, 20 * 1000 * 1000};
+    nanosleep(&t, NULL);
+}
+
 /* Times fn against sgemm in alternation: each round runs one sgemm and then fn (repeated to
- * last at least ~50 ms); the row shows the median time of fn and the median over rounds of
+ * last at least ~50 ms); the row shows the median wall and CPU time of fn (CPU time of all
+ * threads, so about threads x wall when they are all busy) and the median over rounds of
  * (rate of fn) / (rate of the sgemm just before it), which cancels most of the drift of a
  * shared machine. */
 static void run(const char *name, const char *shape, double flops, case_fn fn, void *ctx)
@@ -78,26 +98,31 @@ static void run(const char *name, const char *shape, double flops, case_fn fn, v
     fn(ctx); /* warm-up: first-touch of buffers, FFT plans */
     double once = g3d_time_now() - t0;
     int inner = once >= 0.05 ? 1 : (int)(0.05 / (once > 1e-6 ? once : 1e-6)) + 1;
-    double t[64], ratio[64];
+    double t[64], cpu[64], ratio[64];
     int reps = g_reps < 64 ? g_reps : 64;
     for (int r = 0; r < reps; r++) {
+        settle();
         double base = sgemm_rate();
         g_sgemm_lo = base < g_sgemm_lo ? base : g_sgemm_lo;
         g_sgemm_hi = base > g_sgemm_hi ? base : g_sgemm_hi;
+        settle();
         t0 = g3d_time_now();
+        double c0 = cpu_now();
         for (int i = 0; i < inner; i++) fn(ctx);
         t[r] = (g3d_time_now() - t0) / inner;
+        cpu[r] = (cpu_now() - c0) / inner;
         ratio[r] = flops / t[r] * 1e-9 / base;
     }
     qsort(t, reps, sizeof *t, cmp_double);
+    qsort(cpu, reps, sizeof *cpu, cmp_double);
     qsort(ratio, reps, sizeof *ratio, cmp_double);
-    double tm = t[reps / 2], rm = ratio[reps / 2];
+    double tm = t[reps / 2], cm = cpu[reps / 2], rm = ratio[reps / 2];
     if (flops > 0) note_kind(name, rm);
     if (flops > 0)
-        printf("| %-26s | %-36s | %8.2f | %9.2f | %7.1f | %5.0f %% |\n", name, shape, flops * 1e-9, tm * 1e3,
-               flops / tm * 1e-9, 100.0 * rm);
+        printf("| %-26s | %-36s | %8.2f | %9.2f | %9.2f | %7.1f | %5.0f %% |\n", name, shape, flops * 1e-9, tm * 1e3,
+               cm * 1e3, flops / tm * 1e-9, 100.0 * rm);
     else
-        printf("| %-26s | %-36s | %8s | %9.2f | %7s | %7s |\n", name, shape, "-", tm * 1e3, "-", "-");
+        printf("| %-26s | %-36s | %8s | %9.2f | %9.2f | %7s | %7s |\n", name, shape, "-", tm * 1e3, cm * 1e3, "-", "-");
     fflush(stdout);
 }
 
@@ -251,6 +276,14 @@ static void misc(const char *name, const char *shape, int kind, int c, int h, in
 
 int main(int argc, char **argv)
 {
+    /* OpenBLAS's worker threads spin (yielding) for 2^28 cycles, about 0.1 s, after every call
+     * unless OPENBLAS_THREAD_TIMEOUT says otherwise; they would share the cores with the operator
+     * timed right after each sgemm. The variable is read when the library loads, hence the
+     * re-exec (if it fails, the run goes on with the spinning threads). */
+    if (!getenv("OPENBLAS_THREAD_TIMEOUT")) {
+        setenv("OPENBLAS_THREAD_TIMEOUT", "4", 1);
+        execv("/proc/self/exe", argv);
+    }
     g3d_process_setup(argv);
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--reps") && i + 1 < argc)
@@ -261,12 +294,14 @@ int main(int argc, char **argv)
     g_threads = omp_get_max_threads();
     openblas_set_num_threads(g_threads);
     g_a = rnd(1536 * 1536, 1.0f), g_b = rnd(1536 * 1536, 1.0f), g_c = malloc(sizeof(float) * 1536 * 1536);
-    const char *ct = getenv("OPENBLAS_CORETYPE");
-    printf("kernels %s, %d threads, OpenBLAS core %s (OPENBLAS_CORETYPE %s%s)\n", g3d_nn_isa_name(), g_threads,
-           openblas_get_corename(), ct ? "= " : "unset", ct ? ct : "");
-    printf("| %-26s | %-36s | %8s | %9s | %7s | %7s |\n", "operator", "shape", "GFLOP", "ms", "GFLOP/s", "sgemm");
-    printf("|%s|%s|%s|%s|%s|%s|\n", "----------------------------", "--------------------------------------",
-           "----------", "-----------", "---------", "---------");
+    const char *ct = getenv("OPENBLAS_CORETYPE"), *tt = getenv("OPENBLAS_THREAD_TIMEOUT");
+    printf("kernels %s, %d threads, OpenBLAS core %s (OPENBLAS_CORETYPE %s%s, OPENBLAS_THREAD_TIMEOUT %s)\n",
+           g3d_nn_isa_name(), g_threads, openblas_get_corename(), ct ? "= " : "unset", ct ? ct : "",
+           tt ? tt : "unset");
+    printf("| %-26s | %-36s | %8s | %9s | %9s | %7s | %7s |\n", "operator", "shape", "GFLOP", "ms", "cpu ms", "GFLOP/s",
+           "sgemm");
+    printf("|%s|%s|%s|%s|%s|%s|%s|\n", "----------------------------", "--------------------------------------",
+           "----------", "-----------", "-----------", "---------", "---------");
 
     lin("linear dinov2-s qkv", 1370, 384, 1152, G3D_ACT_NONE, 0, G3D_DT_F32, 0);
     lin("linear dinov2-s proj", 1370, 384, 384, G3D_ACT_NONE, 1, G3D_DT_F32, 0);

@@ -139,7 +139,9 @@ typedef struct convt_prep {
     int nph;
     phase *ph;
     /* kernel = stride, no padding: each phase is one tap at offset 0, so all phases are one
-     * product [nph*cout x cin] x x, packing the input once: the phases' kernels stacked */
+     * product [cout*nph x cin] x x, packing the input once: the phases' kernels stacked, row
+     * co*nph + ry*s + rx for output channel co of phase (ry, rx), so the s rows of one (co, ry)
+     * fill an output row together (the product's interleaved epilogue) */
     float *stack;
 } convt_prep;
 
@@ -210,10 +212,12 @@ static g3d_status convt_build(const g3d_nn_conv *c, convt_prep **out)
     int single = c->output_padding == 0; /* else the padded border gets no tap, only the bias */
     for (int i = 0; i < p->nph; i++) single &= p->ph[i].ntaps == 1 && !p->ph[i].dy[0] && !p->ph[i].dx[0];
     if (single) {
-        const size_t n = (size_t)c->cout * c->cin;
-        p->stack = malloc(sizeof(float) * n * p->nph);
+        p->stack = malloc(sizeof(float) * (size_t)c->cout * c->cin * p->nph);
         if (!p->stack) goto nomem_p;
-        for (int i = 0; i < p->nph; i++) memcpy(p->stack + i * n, p->ph[i].w, sizeof(float) * n);
+        for (int co = 0; co < c->cout; co++)
+            for (int i = 0; i < p->nph; i++)
+                memcpy(p->stack + ((size_t)co * p->nph + i) * c->cin, p->ph[i].w + (size_t)co * c->cin,
+                       sizeof(float) * c->cin);
     }
     *out = p;
     return G3D_OK;
@@ -231,16 +235,16 @@ static g3d_status convt_forward(const g3d_nn_conv *c, const convt_prep *p, const
     const int s = one(c->stride);
     const size_t plane = (size_t)ho * wo;
     if (p->stack) {
-        /* row r of the stacked product is channel r % cout of phase r / cout */
+        /* row r of the stacked product is channel r / nph of phase r % nph */
         long *rowoff = malloc(sizeof(long) * p->nph * c->cout);
         if (!rowoff) return G3D_ERR(G3D_ERR_NOMEM, "conv_transpose2d: out of memory");
-        for (int i = 0; i < p->nph; i++)
-            for (int co = 0; co < c->cout; co++)
-                rowoff[i * c->cout + co] = (long)co * plane + (long)p->ph[i].ry * wo + p->ph[i].rx;
+        for (int co = 0; co < c->cout; co++)
+            for (int i = 0; i < p->nph; i++)
+                rowoff[co * p->nph + i] = (long)co * plane + (long)p->ph[i].ry * wo + p->ph[i].rx;
         nn_gemm g = {.M = p->nph * c->cout, .N = h * w, .K = c->cin, .a = p->stack, .lda = c->cin, .ka = 1,
                      .bkind = NN_B_ROWS, .b = x, .ldb = (long)h * w, .y = y, .rowoff = rowoff, .qw = w,
-                     .oys = (long)s * wo, .oxs = s, .alpha = 1.0f, .bias = c->b, .chan_rows = 1, .chan_mod = c->cout,
-                     .epi = epi};
+                     .oys = (long)s * wo, .oxs = s, .alpha = 1.0f, .bias = c->b, .chan_rows = 1, .chan_div = p->nph,
+                     .ilv = s, .epi = epi};
         g3d_status rc = nn_gemm_run(&g);
         free(rowoff);
         return rc;

@@ -63,7 +63,12 @@ typedef struct nn_gemm {
     float alpha;          /* multiplies the product (1 unless set) */
     const float *bias;    /* per output channel */
     int chan_rows;        /* 1: channels are the rows of C (convolution), 0: the columns */
-    int chan_mod;         /* with chan_rows: row i is channel i % chan_mod (0: channel i) */
+    int chan_div;         /* with chan_rows: row i is channel i / chan_div (0: channel i) */
+    /* > 1 (with rowoff, qw, chan_rows): rows i + t, t < ilv, i a multiple of ilv, write the
+     * pixels just after row i's, rowoff[i + t] = rowoff[i] + t and oxs = ilv, so an output row
+     * is their values interleaved (a transposed convolution with kernel = stride); they share
+     * a channel */
+    int ilv;
     const g3d_nn_epi *epi;
 } nn_gemm;
 
