@@ -185,12 +185,17 @@ TEST(conv_against_reference)
         {10, 10, 3, 2, 1, 1, 10, 15, 14, 0, 0, G3D_PAD_REFLECT},   /* depthwise */
         {10, 10, 5, 1, 4, 2, 10, 15, 14, 0, 0, G3D_PAD_REPLICATE}, /* depthwise, dilated */
         {40, 30, 1, 1, 0, 1, 1, 13, 21, 0, 0, G3D_PAD_ZEROS},      /* pointwise */
+        {400, 9, 1, 1, 0, 1, 1, 7, 11, 0, 0, G3D_PAD_ZEROS},       /* pointwise, two K blocks */
+        {12, 520, 1, 1, 0, 1, 1, 5, 7, 0, 0, G3D_PAD_ZEROS},       /* pointwise, two row tiles */
         {7, 5, 1, 2, 0, 1, 1, 13, 21, 0, 0, G3D_PAD_ZEROS},
         {2, 3, 3, 1, 1, 1, 1, 1, 2, 0, 0, G3D_PAD_ZEROS},          /* mostly padding */
         {20, 11, 3, 2, 1, 1, 1, 9, 8, 1, 1, G3D_PAD_ZEROS},        /* transposed */
         {20, 11, 2, 2, 0, 1, 1, 9, 8, 1, 0, G3D_PAD_ZEROS},
         {20, 11, 2, 2, 0, 1, 1, 9, 8, 1, 1, G3D_PAD_ZEROS},
         {20, 11, 4, 4, 0, 1, 1, 9, 8, 1, 0, G3D_PAD_ZEROS},
+        {20, 40, 4, 4, 0, 1, 1, 5, 70, 1, 0, G3D_PAD_ZEROS},       /* 640 interleaved rows: two row tiles */
+        {9, 7, 3, 3, 0, 1, 1, 6, 5, 1, 0, G3D_PAD_ZEROS},          /* interleave by 3 */
+        {400, 5, 2, 2, 0, 1, 1, 4, 7, 1, 0, G3D_PAD_ZEROS},        /* interleaved, two K blocks */
         {20, 11, 5, 3, 2, 2, 1, 9, 8, 1, 2, G3D_PAD_ZEROS},
         {70, 9, 3, 1, 1, 1, 1, 6, 7, 1, 0, G3D_PAD_ZEROS},
         /* Winograd when prepared: odd sizes, every padding, several channel and tile blocks */
@@ -401,7 +406,9 @@ TEST(independent_of_thread_count)
     float *tok = rnd((size_t)n * in, 4, 1), *qkv = rnd((size_t)n * 3 * 64, 5, 1), *g = rnd(cout, 6, 1);
     /* prepared: F(2x2) at 40->50, F(4x4) at 64->70 */
     float *x4 = rnd((size_t)64 * h * w, 7, 1), *w4 = rnd((size_t)70 * 64 * 9, 8, 0.1f);
-    float *ref[7] = {0}, *got[7];
+    /* a 1x1 convolution and a transposed one with kernel = stride (interleaved rows), residuals */
+    float *res1 = rnd((size_t)cout * h * w, 9, 1), *resT = rnd((size_t)30 * 4 * h * w, 10, 1);
+    float *ref[9] = {0}, *got[9];
     const int maxt = omp_get_max_threads();
     for (int t = 1; t <= 3; t++) {
         omp_set_num_threads(t);
@@ -431,9 +438,22 @@ TEST(independent_of_thread_count)
         CHECK_OK(g3d_nn_conv_prepare(&c4));
         CHECK_OK(g3d_nn_conv_forward(&c4, x4, h, w, got[6], NULL));
         g3d_nn_conv_release(&c4);
-        const size_t sz[7] = {(size_t)cout * h * w, (size_t)n * out,     (size_t)n * 64,    (size_t)cout * h * w,
-                              (size_t)cin * h * w,  (size_t)cout * h * w, (size_t)70 * h * w};
-        for (int i = 0; i < 7; i++) {
+        got[7] = malloc(sizeof(float) * cout * h * w);
+        g3d_nn_conv c1 = g3d_nn_conv_make(cin, cout, 1, 1, 0, wc, g);
+        g3d_nn_epi e1 = {.act = G3D_ACT_GELU, .scale = g, .res = res1};
+        CHECK_OK(g3d_nn_conv_forward(&c1, x, h, w, got[7], &e1));
+        got[8] = malloc(sizeof(float) * 30 * 4 * h * w);
+        g3d_nn_conv ct = g3d_nn_conv_make(cin, 30, 2, 2, 0, wc, g);
+        ct.transposed = 1;
+        CHECK_OK(g3d_nn_conv_prepare(&ct));
+        memcpy(got[8], resT, sizeof(float) * 30 * 4 * h * w);
+        g3d_nn_epi eT = {.act = G3D_ACT_SILU, .res = got[8]};
+        CHECK_OK(g3d_nn_conv_forward(&ct, x, h, w, got[8], &eT));
+        g3d_nn_conv_release(&ct);
+        const size_t sz[9] = {(size_t)cout * h * w, (size_t)n * out,     (size_t)n * 64,     (size_t)cout * h * w,
+                              (size_t)cin * h * w,  (size_t)cout * h * w, (size_t)70 * h * w, (size_t)cout * h * w,
+                              (size_t)30 * 4 * h * w};
+        for (int i = 0; i < 9; i++) {
             if (t == 1) {
                 ref[i] = got[i];
                 continue;
@@ -443,8 +463,8 @@ TEST(independent_of_thread_count)
         }
     }
     omp_set_num_threads(maxt);
-    for (int i = 0; i < 7; i++) free(ref[i]);
-    free(x4), free(w4);
+    for (int i = 0; i < 9; i++) free(ref[i]);
+    free(x4), free(w4), free(res1), free(resT);
     free(x), free(wc), free(wl), free(tok), free(qkv), free(g);
 }
 
