@@ -391,31 +391,26 @@ g3d_status nn_gemm_run(const nn_gemm *g)
     const int tm = (int)cdiv(g->M, t.MT), tn = (int)cdiv(g->N, t.NT), ntiles = tm * tn;
     int nth = omp_in_parallel() ? 1 : omp_get_max_threads();
     if (nth > ntiles) nth = ntiles;
-    int failed = 0;
+    /* Every thread's scratch in one block taken by the calling thread: the main heap keeps a
+     * block that size after the first call, where a worker thread's frees of its own (some
+     * hundred KB) went back to the system and were faulted in again on every call. */
     const long ldc = rup(t.NT, 64);
+    const size_t f_ct = (size_t)rup(t.MT * ldc, 16), f_bp = (size_t)rup((long)t.KC * ldc, 16);
+    const size_t f_ae = (size_t)rup((long)NN_MR * t.KC, 16), f_aw = g->a16 ? (size_t)rup((long)t.MT * t.KC, 16) : 0;
+    const size_t f_pc = g->bkind == NN_B_CONV ? (size_t)rup((long)(sizeof(piece) * (t.NT + 8) + 3) / 4, 16) : 0;
+    const size_t per = f_ct + f_bp + f_ae + f_aw + f_pc;
+    float *block = aligned_alloc(64, sizeof(float) * per * nth);
+    if (!block) return G3D_ERR(G3D_ERR_NOMEM, "matrix product %dx%dx%d: cannot allocate tile scratch", g->M, g->N, g->K);
 #pragma omp parallel num_threads(nth)
     {
-        scratch s = {0};
-        s.ct = aligned_alloc(64, sizeof(float) * (size_t)rup(t.MT * ldc, 16));
-        s.bp = aligned_alloc(64, sizeof(float) * (size_t)rup((long)t.KC * ldc, 16));
-        s.ae = malloc(sizeof(float) * (size_t)NN_MR * t.KC);
-        s.aw = g->a16 ? malloc(sizeof(float) * (size_t)t.MT * t.KC) : NULL;
-        s.pieces = g->bkind == NN_B_CONV ? malloc(sizeof(piece) * (size_t)(t.NT + 8)) : NULL;
-        int ok = s.ct && s.bp && s.ae && (!g->a16 || s.aw) && (g->bkind != NN_B_CONV || s.pieces);
-        if (!ok) {
-#pragma omp atomic write
-            failed = 1;
-        }
+        float *mine = block + per * omp_get_thread_num();
+        scratch s = {.ct = mine, .bp = mine + f_ct, .ae = mine + f_ct + f_bp};
+        s.aw = g->a16 ? s.ae + f_ae : NULL;
+        s.pieces = f_pc ? (piece *)(s.ae + f_ae + f_aw) : NULL;
 #pragma omp for schedule(dynamic, 1)
-        for (int i = 0; i < ntiles; i++)
-            if (ok) run_tile(g, &t, &s, (i / tn) * t.MT, (i % tn) * t.NT);
-        free(s.ct);
-        free(s.bp);
-        free(s.ae);
-        free(s.aw);
-        free(s.pieces);
+        for (int i = 0; i < ntiles; i++) run_tile(g, &t, &s, (i / tn) * t.MT, (i % tn) * t.NT);
     }
-    if (failed) return G3D_ERR(G3D_ERR_NOMEM, "matrix product %dx%dx%d: cannot allocate tile scratch", g->M, g->N, g->K);
+    free(block);
     return G3D_OK;
 }
 
