@@ -155,6 +155,16 @@ typedef struct tiling {
     int KC, MT, NT;
 } tiling;
 
+/* Rows handled together: NN_MR for the kernel, and a multiple of ilv so interleaved rows stay
+ * in one tile and one epilogue call (lcm(NN_MR, ilv)). */
+static int row_unit(const nn_gemm *g)
+{
+    int unit = NN_MR;
+    if (g->ilv > 1)
+        while (unit % g->ilv) unit += NN_MR;
+    return unit;
+}
+
 /* A pure function of the shape (never of the thread count). K in blocks of <= 320 so a packed
  * block of B stays in L2. Every tile packs its own block of B (unless B was packed at load),
  * so the rows of a tile share one packing: a tile takes all rows up to 512 when B is a plain
@@ -167,10 +177,7 @@ static tiling choose_tiling(const nn_gemm *g)
     tiling t;
     int nb = g->K <= 384 ? 1 : (int)cdiv(g->K, 320);
     t.KC = (int)cdiv(g->K, nb);
-    const int cap = g->bkind == NN_B_PANELS ? 96 : g->bkind == NN_B_ROWS ? 512 : 216;
-    int unit = NN_MR;
-    if (g->ilv > 1)
-        while (unit % g->ilv) unit += NN_MR;
+    const int cap = g->bkind == NN_B_PANELS ? 96 : g->bkind == NN_B_ROWS ? 512 : 216, unit = row_unit(g);
     t.MT = (int)rup(cdiv(g->M, cdiv(g->M, cap)), unit);
     t.NT = g->N > 128 ? 256 : g->N > 64 ? 128 : 64; /* halved below: stays a multiple of 64 */
     while (cdiv(g->M, t.MT) * cdiv(g->N, t.NT) < 8) {
@@ -185,8 +192,8 @@ static tiling choose_tiling(const nn_gemm *g)
 }
 
 /* ---- epilogue -------------------------------------------------------------------------- */
-/* Cloned per instruction set like the packing: with a short K (a 64-channel 1x1 convolution)
- * the epilogue's passes over each tile are a tenth of the time in baseline SSE. */
+/* The epilogue's loops are cloned per instruction set like the packing (the library itself is
+ * built for baseline x86-64). */
 #define CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
 
 /* v = scale * act(alpha v + bias) over n values of row `row` of C whose first column is n0. */
@@ -313,11 +320,8 @@ static void run_tile(const nn_gemm *g, const tiling *t, const scratch *s, int m0
      * every output that had cost 3-4 % of a Depth Anything pass. */
     const int direct = !g->qw && !g->rowoff && !(g->epi && g->epi->res) && nt % 16 == 0;
     float *const cdir = direct ? g->y + (long)m0 * g->ldy + n0 : NULL;
-    /* with the last block of K the epilogue follows each group of rows while it is still in
-     * L1 (ilv rows must be finished together: groups of lcm(NN_MR, ilv) rows) */
-    int egroup = NN_MR;
-    if (g->ilv > 1)
-        while (egroup % g->ilv) egroup += NN_MR;
+    /* with the last block of K the epilogue follows each group of rows while it is still in L1 */
+    const int egroup = row_unit(g);
     int np = g->bkind == NN_B_CONV ? conv_pieces(g->conv, n0, nt, s->pieces) : 0;
     for (int k0 = 0; k0 < g->K; k0 += t->KC) {
         const int kc = g->K - k0 < t->KC ? g->K - k0 : t->KC, last = k0 + kc == g->K;
