@@ -192,27 +192,57 @@ INLINE void transpose16(vf t[16])
 #undef STAGE
 }
 
-/* Partial blocks (head sizes 40, 80: a third of SD's blocks) use masked loads and stores;
- * elsewhere they go through a zeroed copy. */
+/* In-lane unpacks, then 128-bit lane shuffles: the same 64 shuffles as transpose16 but cheaper
+ * ones, each stage in place so the 16 rows and two temporaries stay in registers. Column c of the
+ * block ends in t[c ^ ((c ^ (c >> 1)) & 1) * 3 ...], i.e. columns 4m+1 and 4m+2 swap places:
+ * see TCOL. */
+#define TCOL(c) ((c) & 3) == 1 ? (c) + 1 : ((c) & 3) == 2 ? (c) - 1 : (c)
+__attribute__((target("avx512f"))) static inline void transpose16_512(__m512 t[16])
+{
+    for (int i = 0; i < 16; i += 2) {
+        const __m512 x = t[i], y = t[i + 1];
+        t[i] = _mm512_unpacklo_ps(x, y), t[i + 1] = _mm512_unpackhi_ps(x, y);
+    }
+    for (int i = 0; i < 16; i += 4)
+        for (int j = 0; j < 2; j++) {
+            const __m512d x = (__m512d)t[i + j], y = (__m512d)t[i + j + 2];
+            t[i + j] = (__m512)_mm512_unpacklo_pd(x, y), t[i + j + 2] = (__m512)_mm512_unpackhi_pd(x, y);
+        }
+    for (int i = 0; i < 16; i += 8)
+        for (int k = 0; k < 4; k++) {
+            const __m512 x = t[i + k], y = t[i + k + 4];
+            t[i + k] = _mm512_shuffle_f32x4(x, y, 0x88), t[i + k + 4] = _mm512_shuffle_f32x4(x, y, 0xdd);
+        }
+    for (int k = 0; k < 8; k++) {
+        const __m512 x = t[k], y = t[k + 8];
+        t[k] = _mm512_shuffle_f32x4(x, y, 0x88), t[k + 8] = _mm512_shuffle_f32x4(x, y, 0xdd);
+    }
+}
+
+/* Whole 16 x 16 blocks take plain loads and stores; the partial ones (head sizes 40, 80: a
+ * third of SD's blocks; short query blocks) masked ones. Rows are addressed by stepping one
+ * pointer (indexing by r * lds made GCC keep 16 row addresses and spill them). */
 __attribute__((target("avx512f"))) static void transpose_tile512(const float *src, long lds, int nr, int nc,
                                                                 float *dst, long ldd, int w, float scale,
                                                                 const float *rscale)
 {
     for (int c0 = 0; c0 < nc; c0 += 16) {
         const int cn = nc - c0 < 16 ? nc - c0 : 16;
+        const __mmask16 cm = (__mmask16)((1u << cn) - 1);
         for (int r0 = 0; r0 < w; r0 += 16) {
             const int rn = nr - r0 < 16 ? (nr - r0 > 0 ? nr - r0 : 0) : 16, wn = w - r0 < 16 ? w - r0 : 16;
-            const __mmask16 cm = (__mmask16)((1u << cn) - 1), wm = (__mmask16)((1u << wn) - 1);
+            const __mmask16 wm = (__mmask16)((1u << wn) - 1);
             const float *p = src + (long)r0 * lds + c0;
+            __m512 t[16];
+            for (int r = 0; r < 16; r++, p += lds) t[r] = r < rn ? _mm512_maskz_loadu_ps(cm, p) : _mm512_setzero_ps();
+            transpose16_512(t);
             float *q = dst + (long)c0 * ldd + r0;
-            vf t[16];
-            for (int r = 0; r < 16; r++) t[r] = (vf)_mm512_maskz_loadu_ps(r < rn ? cm : 0, r < rn ? p + r * lds : p);
-            transpose16(t);
-            for (int c = 0; c < 16; c++)
-                if (c < cn) _mm512_mask_storeu_ps(q + c * ldd, wm, (__m512)(rscale ? t[c] * rscale[c0 + c] : t[c] * scale));
+            for (int c = 0; c < cn; c++, q += ldd)
+                _mm512_mask_storeu_ps(q, wm, _mm512_mul_ps(t[TCOL(c)], _mm512_set1_ps(rscale ? rscale[c0 + c] : scale)));
         }
     }
 }
+#undef TCOL
 
 static void transpose_tile(const float *src, long lds, int nr, int nc, float *dst, long ldd, int w, float scale,
                            const float *rscale)

@@ -17,6 +17,7 @@
 
 #define QB 64  /* queries per task */
 #define KB 240 /* most keys per block (blocks are balanced: 196 keys are one block) */
+#define NK_SHORT KB /* key sets of one block */
 
 static int rup6(int x) { return (x + NN_MR - 1) / NN_MR * NN_MR; }
 
@@ -24,7 +25,28 @@ typedef struct tiles {
     float *qt, *st, *ot, *edge, *m, *l, *t1;
 } tiles;
 
-static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0)
+/* The next block a thread computes: head h, queries q0 .. q0+n-1 of problem b (n = 0: none). */
+typedef struct next_block {
+    int b, h, q0, n;
+} next_block;
+
+/* Rows i0 .. i1-1 of the next block's queries and outputs, fetched into L2 while the current
+ * block computes (a few rows with each group's product): rows that far apart are not followed
+ * by the hardware prefetcher, and their misses had stalled the transposes and the stores of
+ * short-key attention. */
+static inline __attribute__((always_inline)) void prefetch_rows(const g3d_nn_attn *a, const next_block *nx, int i0, int i1)
+{
+    for (int i = i0; i < i1 && i < nx->n; i++) {
+        const float *qi = a->q + nx->b * a->bsq + (long)(nx->q0 + i) * a->ldq + nx->h * a->hd;
+        const float *oi = a->out + nx->b * a->bso + (long)(nx->q0 + i) * a->ldo + nx->h * a->hdv;
+        for (int c = 0; c < a->hd; c += 16) __builtin_prefetch(qi + c, 0, 2);
+        __builtin_prefetch(qi + a->hd - 1, 0, 2);
+        for (int c = 0; c < a->hdv; c += 16) __builtin_prefetch(oi + c, 1, 2);
+        __builtin_prefetch(oi + a->hdv - 1, 1, 2);
+    }
+}
+
+static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0, const next_block *nx)
 {
     /* problem b of a batch: the same descriptor with its pointers moved */
     g3d_nn_attn pb = *in;
@@ -55,6 +77,7 @@ static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0)
                 ka = T->edge, lda = hd;
             }
             nn_kernel(hd, ka, lda, 1, qt, QB, st + r * QB, QB, nvq, 0);
+            if (k0 == 0) prefetch_rows(in, nx, r, r + NN_MR);
         }
         if (a->bias) a->bias(a->bias_ctx, b, h, q0, nqv, k0, kb, st, 1, QB);
         if (a->causal)
@@ -109,8 +132,16 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
     g3d_nn_attn a;
     G3D_TRY(normalise(desc, &a));
     if (a.nq == 0) return G3D_OK;
-    const int nqb = (a.nq + QB - 1) / QB, ntask = a.batch * a.heads * nqb;
     int nth = omp_in_parallel() ? 1 : omp_get_max_threads();
+    /* With long key sets a task is one head and one block of 64 queries (consecutive tasks share
+     * the head's keys and values). With short ones the per-block work is small and the rows of
+     * the queries and outputs weigh: a task is every head of up to 4 blocks (fewer where there are
+     * few blocks per thread), so those rows stay in cache from one head to the next and the next
+     * block's are fetched ahead. */
+    const int shortk = a.nk <= NK_SHORT, nqb = (a.nq + QB - 1) / QB;
+    int g = a.batch * nqb / (4 * nth);
+    g = g < 1 ? 1 : g > 4 ? 4 : g;
+    const int nch = (nqb + g - 1) / g, ntask = shortk ? a.batch * nch : a.batch * a.heads * nqb;
     if (nth > ntask) nth = ntask;
     const int edge = NN_MR * (a.hd > KB ? a.hd : KB);
     int failed = 0;
@@ -128,8 +159,22 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
             T.edge = T.t1 + QB;
         }
 #pragma omp for schedule(dynamic, 1)
-        for (int t = 0; t < ntask; t++)
-            if (buf) task(&a, &T, t / (a.heads * nqb), t / nqb % a.heads, (t % nqb) * QB);
+        for (int t = 0; t < ntask; t++) {
+            if (!buf) continue;
+            if (!shortk) {
+                const next_block none = {0};
+                task(&a, &T, t / (a.heads * nqb), t / nqb % a.heads, (t % nqb) * QB, &none);
+                continue;
+            }
+            const int b = t / nch, qc0 = t % nch * g * QB, qc1 = a.nq - qc0 < g * QB ? a.nq : qc0 + g * QB;
+            for (int h = 0; h < a.heads; h++)
+                for (int q0 = qc0; q0 < qc1; q0 += QB) {
+                    /* the next block of this head, else the first of the next head */
+                    next_block nx = {b, q0 + QB < qc1 ? h : h + 1, q0 + QB < qc1 ? q0 + QB : qc0, 0};
+                    nx.n = nx.h < a.heads ? (qc1 - nx.q0 < QB ? qc1 - nx.q0 : QB) : 0;
+                    task(&a, &T, b, h, q0, &nx);
+                }
+        }
         free(buf);
     }
     if (failed) return G3D_ERR(G3D_ERR_NOMEM, "attention: cannot allocate the per-thread tiles");
