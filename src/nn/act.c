@@ -134,7 +134,7 @@ CLONES void nn_exp_rows(float *s, long lds, int rows, const float *m, float *sum
     }
 }
 
-CLONES void nn_online_softmax(float *s, long lds, int rows, int n, float *m, float *l, float *corr)
+CLONES static void online_softmax(float *s, long lds, int rows, int n, float *m, float *l, float *corr)
 {
     for (int i0 = 0; i0 < n; i0 += 64) {
         /* column maxima: up to 4 vectors side by side and two rows at a time, so the max
@@ -166,6 +166,69 @@ CLONES void nn_online_softmax(float *s, long lds, int rows, int n, float *m, flo
             *(vfu *)(corr + i) = c;
         }
     }
+}
+
+/* The same with AVX-512's own instructions, which the generic vectors above cannot name: the
+ * maxima in one instruction instead of a compare and a blend, and exp's 2^n by vscalefps, which
+ * also flushes to 0 below the float range (the clamp only maps -inf), about 11 instructions per
+ * score instead of 20: the softmax had been a tenth of short-key attention. Same polynomial. */
+__attribute__((target("avx512f"))) static inline __m512 exp2_512(__m512 t)
+{
+    t = _mm512_max_ps(t, _mm512_set1_ps(-160.0f));
+    const __m512 n = _mm512_roundscale_ps(t, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC), r = _mm512_sub_ps(t, n);
+    __m512 p = _mm512_fmadd_ps(_mm512_set1_ps(1.3276466634e-3f), r, _mm512_set1_ps(9.6755418926e-3f));
+    p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(5.5507134646e-2f));
+    p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(2.4022120237e-1f));
+    p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(6.9314694405e-1f));
+    p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.0000001192f));
+    return _mm512_scalef_ps(p, n);
+}
+
+__attribute__((target("avx512f"))) static void online_softmax512(float *s, long lds, int rows, int n, float *m,
+                                                                float *l, float *corr)
+{
+    const __m512 log2e = _mm512_set1_ps(1.44269504088896341f);
+    for (int i0 = 0; i0 < n; i0 += 64) {
+        const int nv = (n - i0) / 16 < 4 ? (n - i0) / 16 : 4;
+        __m512 mx[4], mx2[4];
+        for (int v = 0; v < nv; v++) mx[v] = mx2[v] = _mm512_loadu_ps(m + i0 + 16 * v);
+        int r = 0;
+        for (; r + 2 <= rows; r += 2)
+            for (int v = 0; v < nv; v++) {
+                mx[v] = _mm512_max_ps(mx[v], _mm512_loadu_ps(s + r * lds + i0 + 16 * v));
+                mx2[v] = _mm512_max_ps(mx2[v], _mm512_loadu_ps(s + (r + 1) * lds + i0 + 16 * v));
+            }
+        for (; r < rows; r++)
+            for (int v = 0; v < nv; v++) mx[v] = _mm512_max_ps(mx[v], _mm512_loadu_ps(s + r * lds + i0 + 16 * v));
+        for (int v = 0; v < nv; v++) {
+            const int i = i0 + 16 * v;
+            const __m512 mnew = _mm512_max_ps(mx[v], mx2[v]);
+            /* a column that has seen only -inf keeps m = -inf and subtracts 0 instead */
+            const __m512 meff = _mm512_mul_ps(
+                _mm512_mask_blend_ps(_mm512_cmp_ps_mask(mnew, _mm512_set1_ps(-INFINITY), _CMP_EQ_OQ), mnew,
+                                     _mm512_setzero_ps()),
+                log2e);
+            const __m512 c = exp2_512(_mm512_fmsub_ps(_mm512_loadu_ps(m + i), log2e, meff));
+            __m512 acc = _mm512_mul_ps(_mm512_loadu_ps(l + i), c);
+            float *sq = s + i;
+            for (int q = 0; q < rows; q++, sq += lds) {
+                const __m512 e = exp2_512(_mm512_fmsub_ps(_mm512_loadu_ps(sq), log2e, meff));
+                _mm512_storeu_ps(sq, e);
+                acc = _mm512_add_ps(acc, e);
+            }
+            _mm512_storeu_ps(m + i, mnew);
+            _mm512_storeu_ps(l + i, acc);
+            _mm512_storeu_ps(corr + i, c);
+        }
+    }
+}
+
+void nn_online_softmax(float *s, long lds, int rows, int n, float *m, float *l, float *corr)
+{
+    if (nn_isa() == NN_ISA_AVX512)
+        online_softmax512(s, lds, rows, n, m, l, corr);
+    else
+        online_softmax(s, lds, rows, n, m, l, corr);
 }
 
 /* Transposes of attention's query and output tiles: 16 x 16 blocks through four stages of
