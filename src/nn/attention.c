@@ -65,19 +65,28 @@ static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0, co
     const int nkb = (kend + KB - 1) / KB, kbs = nkb ? (kend + nkb - 1) / nkb : 0;
     for (int k0 = 0; k0 < kend; k0 += kbs) {
         const int kb = kend - k0 < kbs ? kend - k0 : kbs;
-        for (int r = 0; r < kb; r += NN_MR) {
+        /* S^T = K_blk (scale q)^T: the whole groups of six keys in one kernel call (in runs of
+         * four with the prefetches of the next block between them, where there is one) */
+        const int nfull = kb / NN_MR, run = nx->n ? 4 : nfull;
+        for (int g0 = 0; g0 < nfull; g0 += run) {
+            const int ng = nfull - g0 < run ? nfull - g0 : run;
+            nn_kernel_groups(hd, a->k + (long)(k0 + NN_MR * g0) * a->ldk + h * hd, a->ldk, 1, NN_MR * a->ldk, qt, QB,
+                             st + NN_MR * g0 * QB, QB, NN_MR * QB, nvq, ng, 0);
+            if (k0 == 0) prefetch_rows(in, nx, NN_MR * g0, g0 + ng == nfull ? QB : NN_MR * (g0 + ng));
+        }
+        if (kb % NN_MR) {
             /* a last partial group of keys is redone as the six last keys (the values it writes
              * twice come out the same) rather than copied */
-            if (kb - r < NN_MR && kb >= NN_MR) r = kb - NN_MR;
+            const int r = kb >= NN_MR ? kb - NN_MR : 0;
             const float *ka = a->k + (long)(k0 + r) * a->ldk + h * hd;
             long lda = a->ldk;
-            if (kb - r < NN_MR) {
+            if (kb < NN_MR) {
                 for (int i = 0; i < NN_MR; i++)
-                    for (int d = 0; d < hd; d++) T->edge[i * hd + d] = i < kb - r ? ka[i * a->ldk + d] : 0.0f;
+                    for (int d = 0; d < hd; d++) T->edge[i * hd + d] = i < kb ? ka[i * a->ldk + d] : 0.0f;
                 ka = T->edge, lda = hd;
+                if (k0 == 0) prefetch_rows(in, nx, 0, QB);
             }
             nn_kernel(hd, ka, lda, 1, qt, QB, st + r * QB, QB, nvq, 0);
-            if (k0 == 0) prefetch_rows(in, nx, r, r + NN_MR);
         }
         if (a->bias) a->bias(a->bias_ctx, b, h, q0, nqv, k0, kb, st, 1, QB);
         if (a->causal)
@@ -91,16 +100,17 @@ static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0, co
         if (k0)
             for (int d = 0; d < hdv; d++)
                 for (int i = 0; i < QW; i++) ot[d * QB + i] *= corr[i];
-        /* O^T += V^T P^T, six value channels at a time */
-        for (int d0 = 0; d0 < hdv; d0 += NN_MR) {
-            const float *va = a->v + (long)k0 * a->ldv + h * hdv + d0;
-            long lda = 1, ka = a->ldv;
-            if (hdv - d0 < NN_MR) {
-                for (int i = 0; i < NN_MR; i++)
-                    for (int j = 0; j < kb; j++) T->edge[i * KB + j] = i < hdv - d0 ? va[i + (long)j * a->ldv] : 0.0f;
-                va = T->edge, lda = KB, ka = 1;
-            }
-            nn_kernel(kb, va, lda, ka, st, QB, ot + d0 * QB, QB, nvq, k0 > 0);
+        /* O^T += V^T P^T, six value channels at a time, in one call; a last partial group
+         * reads the next head's first channels into the tile's spare rows, or for the last head
+         * (whose row may end there) goes through a zero-padded copy */
+        const float *va = a->v + (long)k0 * a->ldv + h * hdv;
+        const int direct = h * hdv + rup6(hdv) <= a->heads * hdv, ngv = direct ? rup6(hdv) / NN_MR : hdv / NN_MR;
+        nn_kernel_groups(kb, va, 1, a->ldv, NN_MR, st, QB, ot, QB, NN_MR * QB, nvq, ngv, k0 > 0);
+        if (!direct && hdv % NN_MR) {
+            const int d0 = ngv * NN_MR;
+            for (int i = 0; i < NN_MR; i++)
+                for (int j = 0; j < kb; j++) T->edge[i * KB + j] = i < hdv - d0 ? va[d0 + i + (long)j * a->ldv] : 0.0f;
+            nn_kernel(kb, T->edge, KB, 1, st, QB, ot + d0 * QB, QB, nvq, k0 > 0);
         }
     }
     if (kend <= 0) memset(ot, 0, sizeof(float) * (size_t)hdv * QB);
