@@ -48,13 +48,27 @@ static inline __attribute__((always_inline)) void prefetch_rows(const g3d_nn_att
     }
 }
 
-static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0, const next_block *nx)
+/* Block i of the queries: blocks of QB, except that a last one of at most 16 queries and the
+ * block before it split their queries into two of at least 17 (as many vector lanes, but no
+ * products one vector wide: SAM's windows of 196 tokens had ended in a block of 4). */
+static void query_block(int nq, int i, int *q0, int *n)
+{
+    const int nqb = (nq + QB - 1) / QB, rem = nq % QB;
+    if (nqb < 2 || rem == 0 || rem > 16 || i < nqb - 2) {
+        *q0 = i * QB, *n = nq - *q0 < QB ? nq - *q0 : QB;
+        return;
+    }
+    const int first = ((QB + rem) / 2 + 15) / 16 * 16;
+    *q0 = (nqb - 2) * QB + (i == nqb - 1 ? first : 0), *n = i == nqb - 1 ? QB + rem - first : first;
+}
+
+static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0, int nqv, const next_block *nx)
 {
     /* problem b of a batch: the same descriptor with its pointers moved */
     g3d_nn_attn pb = *in;
     pb.q += b * in->bsq, pb.k += b * in->bsk, pb.v += b * in->bsv, pb.out += b * in->bso;
     const g3d_nn_attn *a = &pb;
-    const int hd = a->hd, hdv = a->hdv, nqv = a->nq - q0 < QB ? a->nq - q0 : QB;
+    const int hd = a->hd, hdv = a->hdv;
     const int nvq = (nqv + 15) / 16, QW = 16 * nvq;
     float *qt = T->qt, *st = T->st, *ot = T->ot, *m = T->m, *l = T->l, *corr = T->t1;
     /* queries of the block, scaled, as columns */
@@ -188,18 +202,21 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
 #pragma omp for schedule(dynamic, 1)
         for (int t = 0; t < ntask; t++) {
             if (!buf) continue;
+            int q0, n;
             if (!shortk) {
                 const next_block none = {0};
-                task(&a, &T, t / (a.heads * nqb), t / nqb % a.heads, (t % nqb) * QB, &none);
+                query_block(a.nq, t % nqb, &q0, &n);
+                task(&a, &T, t / (a.heads * nqb), t / nqb % a.heads, q0, n, &none);
                 continue;
             }
-            const int b = t / nch, qc0 = t % nch * g * QB, qc1 = a.nq - qc0 < g * QB ? a.nq : qc0 + g * QB;
+            const int b = t / nch, i0 = t % nch * g, i1 = nqb - i0 < g ? nqb : i0 + g;
             for (int h = 0; h < a.heads; h++)
-                for (int q0 = qc0; q0 < qc1; q0 += QB) {
+                for (int i = i0; i < i1; i++) {
                     /* the next block of this head, else the first of the next head */
-                    next_block nx = {b, q0 + QB < qc1 ? h : h + 1, q0 + QB < qc1 ? q0 + QB : qc0, 0};
-                    nx.n = nx.h < a.heads ? (qc1 - nx.q0 < QB ? qc1 - nx.q0 : QB) : 0;
-                    task(&a, &T, b, h, q0, &nx);
+                    next_block nx = {b, i + 1 < i1 ? h : h + 1, 0, 0};
+                    if (nx.h < a.heads) query_block(a.nq, i + 1 < i1 ? i + 1 : i0, &nx.q0, &nx.n);
+                    query_block(a.nq, i, &q0, &n);
+                    task(&a, &T, b, h, q0, n, &nx);
                 }
         }
         free(buf);
@@ -227,7 +244,9 @@ void g3d_nn_bias_dense_fn(void *ctx, int batch, int head, int q0, int nq, int k0
     }
 }
 
-void g3d_nn_bias_relpos_fn(void *ctx, int batch, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks)
+/* vectorised for the instruction sets of the kernels (it had been 6-10 % of SAM's attention) */
+__attribute__((target_clones("avx512f", "avx2", "default"))) void
+g3d_nn_bias_relpos_fn(void *ctx, int batch, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks)
 {
     const g3d_nn_bias_relpos *r = ctx;
     /* tables are key-major, so the queries of one key are contiguous like the tile's columns */
