@@ -1,13 +1,14 @@
 /* Multi-head attention with an online softmax (flash-attention style), never storing the
  * score matrix.
  *
- * A task is one head and one block of 64 queries. It works on transposed tiles: for a block
- * of keys, S^T [keys x 64 queries] = K_blk (q scale)^T, so the softmax statistics of the 64
- * queries are vectors across the tile's columns, and O^T [hdv x 64] += V_blk^T P^T. Both
+ * The unit of work is one head and one block of up to 64 queries. It works on transposed tiles:
+ * for a block of keys, S^T [keys x 64 queries] = K_blk (q scale)^T, so the softmax statistics of
+ * the 64 queries are vectors across the tile's columns, and O^T [hdv x 64] += V_blk^T P^T. Both
  * products run on the shared kernel with the keys or the value channels as its broadcast
- * operand, read straight from the caller's rows; only the query block is packed. Keeping the
- * queries on the vector side means any head size (40, 80, 160 in SD 1.x) and any key count
- * (77 text tokens) wastes at most a few rows of six. */
+ * operand, read straight from the caller's rows (the values of wide heads through a transposed
+ * copy); only the query block is packed. Keeping the queries on the vector side means any head
+ * size (40, 80, 160 in SD 1.x) and any key count (77 text tokens) wastes at most a few rows of
+ * six. */
 #include "nn/nn_int.h"
 
 #include <math.h>
@@ -15,7 +16,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define QB 64  /* queries per task */
+#define QB 64  /* most queries per block */
 #define KB 240 /* most keys per block (blocks are balanced: 196 keys are one block) */
 #define NK_SHORT KB /* key sets of one block */
 #define VT_MIN 32768 /* key blocks of more values than this go through a transposed copy */
@@ -35,7 +36,8 @@ typedef struct next_block {
 /* Rows i0 .. i1-1 of the next block's queries and outputs, fetched into L2 while the current
  * block computes (a few rows with each group's product): rows that far apart are not followed
  * by the hardware prefetcher, and their misses had stalled the transposes and the stores of
- * short-key attention. */
+ * short-key attention. Always inlined: GCC takes a function of nothing but prefetches for one
+ * without effects and drops the calls. */
 static inline __attribute__((always_inline)) void prefetch_rows(const g3d_nn_attn *a, const next_block *nx, int i0, int i1)
 {
     for (int i = i0; i < i1 && i < nx->n; i++) {
