@@ -254,13 +254,15 @@ g3d_nn_bias_relpos_fn(void *ctx, int batch, int head, int q0, int nq, int k0, in
     /* tables are key-major, so the queries of one key are contiguous like the tile's columns */
     const long hb = (long)batch * r->heads + head;
     const float *rh = r->rh + hb * r->kh * r->nq + q0, *rw = r->rw + hb * r->kw * r->nq + q0;
-    for (int j = 0; j < nk; j++) {
-        const float *h = rh + (long)((k0 + j) / r->kw) * r->nq, *w = rw + (long)((k0 + j) % r->kw) * r->nq;
-        float *sj = s + j * ks;
+    /* the key's grid position by counting, not by a division per key */
+    for (int j = 0, ky = k0 / r->kw, kx = k0 % r->kw; j < nk; j++) {
+        const float *restrict h = rh + (long)ky * r->nq, *restrict w = rw + (long)kx * r->nq;
+        float *restrict sj = s + j * ks;
         if (qs == 1)
             for (int i = 0; i < nq; i++) sj[i] += h[i] + w[i];
         else
             for (int i = 0; i < nq; i++) sj[i * qs] += h[i] + w[i];
+        if (++kx == r->kw) kx = 0, ky++;
     }
 }
 
