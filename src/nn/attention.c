@@ -172,11 +172,11 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
     int nth = omp_in_parallel() ? 1 : omp_get_max_threads();
     /* With long key sets a task is one head and one block of 64 queries (consecutive tasks share
      * the head's keys and values). With short ones the per-block work is small and the rows of
-     * the queries and outputs weigh: a task is every head of up to 4 blocks (fewer where there are
-     * few blocks per thread), so those rows stay in cache from one head to the next and the next
-     * block's are fetched ahead. */
+     * the queries and outputs weigh: a task is every head of up to 4 blocks, so those rows stay in
+     * cache from one head to the next and the next block's are fetched ahead; fewer blocks where
+     * that would leave less than 16 tasks per thread (the last task keeps the others waiting). */
     const int shortk = a.nk <= NK_SHORT, nqb = (a.nq + QB - 1) / QB;
-    int g = a.batch * nqb / (4 * nth);
+    int g = a.batch * nqb / (16 * nth);
     g = g < 1 ? 1 : g > 4 ? 4 : g;
     const int nch = (nqb + g - 1) / g, ntask = shortk ? a.batch * nch : a.batch * a.heads * nqb;
     if (nth > ntask) nth = ntask;
