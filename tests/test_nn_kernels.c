@@ -272,6 +272,33 @@ TEST(transpose_tile_against_reference)
     free(src), free(rs), free(d), free(r);
 }
 
+TEST(kernel_groups_equal_single_calls)
+{
+    /* attention's runs of six-row groups: the same bits as one call per group, any width, with
+     * and without accumulation, rows of A strided (keys) or consecutive (value channels) */
+    float *a = rnd(40 * 300, 41, 1), *b = rnd(300 * 70, 42, 1), *c0 = rnd(40 * 6 * 70, 43, 1);
+    float *x = malloc(sizeof(float) * 40 * 6 * 70), *y = malloc(sizeof(float) * 40 * 6 * 70);
+    const struct {
+        long lda, ka, ga;
+    } lay[] = {{300, 1, 6 * 300}, {1, 300, 6}};
+    for (int i = 0; i < nisa; i++) {
+        int old = nn_isa_force(isas[i]);
+        for (int l = 0; l < 2; l++)
+            for (int nv = 1; nv <= 4; nv++)
+                for (int acc = 0; acc < 2; acc++) {
+                    const int K = l ? 35 : 77, ng = 5;
+                    memcpy(x, c0, sizeof(float) * 40 * 6 * 70), memcpy(y, c0, sizeof(float) * 40 * 6 * 70);
+                    nn_kernel_groups(K, a, lay[l].lda, lay[l].ka, lay[l].ga, b, 70, x, 70, 6 * 70, nv, ng, acc);
+                    for (int g = 0; g < ng; g++)
+                        nn_kernel(K, a + g * lay[l].ga, lay[l].lda, lay[l].ka, b, 70, y + g * 6 * 70, 70, nv, acc);
+                    CHECK_MSG(!memcmp(x, y, sizeof(float) * 40 * 6 * 70), "groups differ (isa %d, layout %d, nv %d, acc %d)",
+                              isas[i], l, nv, acc);
+                }
+        nn_isa_force(old);
+    }
+    free(a), free(b), free(c0), free(x), free(y);
+}
+
 static void check_attention(g3d_nn_attn a, uint64_t seed, const char *what)
 {
     const int hdv = a.hdv ? a.hdv : a.hd, nb = a.batch ? a.batch : 1, nq = a.nq ? a.nq : 1, nk = a.nk ? a.nk : 1;
@@ -319,6 +346,10 @@ TEST(attention_against_reference)
         {{.nq = 20, .nk = 20, .heads = 2, .hd = 8, .scale = 0.3f, .batch = 3, .bias = g3d_nn_bias_relpos_fn,
           .bias_ctx = &rp},
          "3 windows, relative positions"},
+        {{.nq = 200, .nk = 77, .heads = 5, .hd = 40, .scale = 0.15f}, "SD cross-attention shape, 4 query blocks"},
+        {{.nq = 196, .nk = 196, .heads = 3, .hd = 64, .scale = 0.125f, .batch = 2}, "2 windows of 196, last block split"},
+        {{.nq = 70, .nk = 300, .heads = 2, .hd = 256, .hdv = 250, .scale = 0.06f}, "wide heads, values transposed"},
+        {{.nq = 20, .nk = 3, .heads = 3, .hd = 10, .hdv = 7, .scale = 0.3f}, "three keys, odd value heads"},
         {{.nq = 0, .nk = 10, .heads = 2, .hd = 8, .scale = 1}, "no queries"},
         {{.nq = 9, .nk = 0, .heads = 2, .hd = 8, .scale = 1}, "no keys"},
     };
@@ -408,7 +439,7 @@ TEST(independent_of_thread_count)
     float *x4 = rnd((size_t)64 * h * w, 7, 1), *w4 = rnd((size_t)70 * 64 * 9, 8, 0.1f);
     /* a 1x1 convolution and a transposed one with kernel = stride (interleaved rows), residuals */
     float *res1 = rnd((size_t)cout * h * w, 9, 1), *resT = rnd((size_t)30 * 4 * h * w, 10, 1);
-    float *ref[9] = {0}, *got[9];
+    float *ref[10] = {0}, *got[10];
     const int maxt = omp_get_max_threads();
     for (int t = 1; t <= 3; t++) {
         omp_set_num_threads(t);
@@ -450,10 +481,15 @@ TEST(independent_of_thread_count)
         g3d_nn_epi eT = {.act = G3D_ACT_SILU, .res = got[8]};
         CHECK_OK(g3d_nn_conv_forward(&ct, x, h, w, got[8], &eT));
         g3d_nn_conv_release(&ct);
-        const size_t sz[9] = {(size_t)cout * h * w, (size_t)n * out,     (size_t)n * 64,     (size_t)cout * h * w,
-                              (size_t)cin * h * w,  (size_t)cout * h * w, (size_t)70 * h * w, (size_t)cout * h * w,
-                              (size_t)30 * 4 * h * w};
-        for (int i = 0; i < 9; i++) {
+        /* short key set: every head of a few query blocks per task, the next block prefetched */
+        got[9] = malloc(sizeof(float) * n * 64);
+        g3d_nn_attn cross = {.nq = n, .nk = 77, .heads = 4, .hd = 16, .q = qkv, .k = qkv + 64, .v = qkv + 128,
+                             .ldq = 192, .ldk = 192, .ldv = 192, .out = got[9], .scale = 0.25f};
+        CHECK_OK(g3d_nn_attend(&cross));
+        const size_t sz[10] = {(size_t)cout * h * w, (size_t)n * out,     (size_t)n * 64,     (size_t)cout * h * w,
+                               (size_t)cin * h * w,  (size_t)cout * h * w, (size_t)70 * h * w, (size_t)cout * h * w,
+                               (size_t)30 * 4 * h * w, (size_t)n * 64};
+        for (int i = 0; i < 10; i++) {
             if (t == 1) {
                 ref[i] = got[i];
                 continue;
@@ -463,7 +499,7 @@ TEST(independent_of_thread_count)
         }
     }
     omp_set_num_threads(maxt);
-    for (int i = 0; i < 9; i++) free(ref[i]);
+    for (int i = 0; i < 10; i++) free(ref[i]);
     free(x4), free(w4), free(res1), free(resT);
     free(x), free(wc), free(wl), free(tok), free(qkv), free(g);
 }
@@ -545,6 +581,7 @@ int main(void)
     printf("kernels: %s (testing %d instruction sets)\n", g3d_nn_isa_name(), nisa);
     RUN(matmul_shapes_and_transposes);
     RUN(transpose_tile_against_reference);
+    RUN(kernel_groups_equal_single_calls);
     RUN(linear_epilogues_and_16bit_weights);
     RUN(conv_against_reference);
     RUN(conv_bad_configurations);

@@ -9,8 +9,9 @@
  *
  * The scores are never stored whole: queries go in blocks of 64, keys in blocks, and the
  * softmax is carried along the keys online (running maximum and sum), so scratch memory is a
- * few tiles per thread whatever the token count. Each (head, query block) is one task; a task
- * walks the keys in a fixed order, so the result does not depend on the thread count.
+ * few tiles per thread whatever the token count. Threads take (head, query block) pairs (every
+ * head of a few blocks at once for key sets of at most 240); each walks the keys in a fixed
+ * order, so the result does not depend on the thread count.
  */
 #ifndef G3D_NN_ATTENTION_H
 #define G3D_NN_ATTENTION_H

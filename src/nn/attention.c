@@ -1,13 +1,14 @@
 /* Multi-head attention with an online softmax (flash-attention style), never storing the
  * score matrix.
  *
- * A task is one head and one block of 64 queries. It works on transposed tiles: for a block
- * of keys, S^T [keys x 64 queries] = K_blk (q scale)^T, so the softmax statistics of the 64
- * queries are vectors across the tile's columns, and O^T [hdv x 64] += V_blk^T P^T. Both
+ * The unit of work is one head and one block of up to 64 queries. It works on transposed tiles:
+ * for a block of keys, S^T [keys x 64 queries] = K_blk (q scale)^T, so the softmax statistics of
+ * the 64 queries are vectors across the tile's columns, and O^T [hdv x 64] += V_blk^T P^T. Both
  * products run on the shared kernel with the keys or the value channels as its broadcast
- * operand, read straight from the caller's rows; only the query block is packed. Keeping the
- * queries on the vector side means any head size (40, 80, 160 in SD 1.x) and any key count
- * (77 text tokens) wastes at most a few rows of six. */
+ * operand, read straight from the caller's rows (the values of wide heads through a transposed
+ * copy); only the query block is packed. Keeping the queries on the vector side means any head
+ * size (40, 80, 160 in SD 1.x) and any key count (77 text tokens) wastes at most a few rows of
+ * six. */
 #include "nn/nn_int.h"
 
 #include <math.h>
@@ -15,22 +16,61 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define QB 64  /* queries per task */
+#define QB 64  /* most queries per block */
 #define KB 240 /* most keys per block (blocks are balanced: 196 keys are one block) */
+#define NK_SHORT KB /* key sets of one block */
+#define VT_MIN 32768 /* key blocks of more values than this go through a transposed copy */
 
 static int rup6(int x) { return (x + NN_MR - 1) / NN_MR * NN_MR; }
 
 typedef struct tiles {
     float *qt, *st, *ot, *edge, *m, *l, *t1;
+    float *vt; /* [rup6(hdv) x KB]: a key block's values transposed, for wide heads (or NULL) */
 } tiles;
 
-static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0)
+/* The next block a thread computes: head h, queries q0 .. q0+n-1 of problem b (n = 0: none). */
+typedef struct next_block {
+    int b, h, q0, n;
+} next_block;
+
+/* Rows i0 .. i1-1 of the next block's queries and outputs, fetched into L2 while the current
+ * block computes (a few rows with each group's product): rows that far apart are not followed
+ * by the hardware prefetcher, and their misses had stalled the transposes and the stores of
+ * short-key attention. Always inlined: GCC takes a function of nothing but prefetches for one
+ * without effects and drops the calls. */
+static inline __attribute__((always_inline)) void prefetch_rows(const g3d_nn_attn *a, const next_block *nx, int i0, int i1)
+{
+    for (int i = i0; i < i1 && i < nx->n; i++) {
+        const float *qi = a->q + nx->b * a->bsq + (long)(nx->q0 + i) * a->ldq + nx->h * a->hd;
+        const float *oi = a->out + nx->b * a->bso + (long)(nx->q0 + i) * a->ldo + nx->h * a->hdv;
+        for (int c = 0; c < a->hd; c += 16) __builtin_prefetch(qi + c, 0, 2);
+        __builtin_prefetch(qi + a->hd - 1, 0, 2);
+        for (int c = 0; c < a->hdv; c += 16) __builtin_prefetch(oi + c, 1, 2);
+        __builtin_prefetch(oi + a->hdv - 1, 1, 2);
+    }
+}
+
+/* Block i of the queries: blocks of QB, except that a last one of at most 16 queries and the
+ * block before it split their queries into two of at least 17 (as many vector lanes, but no
+ * products one vector wide: SAM's windows of 196 tokens had ended in a block of 4). */
+static void query_block(int nq, int i, int *q0, int *n)
+{
+    const int nqb = (nq + QB - 1) / QB, rem = nq % QB;
+    if (nqb < 2 || rem == 0 || rem > 16 || i < nqb - 2) {
+        *q0 = i * QB, *n = nq - *q0 < QB ? nq - *q0 : QB;
+        return;
+    }
+    const int first = ((QB + rem) / 2 + 15) / 16 * 16;
+    *q0 = (nqb - 2) * QB + (i == nqb - 1 ? first : 0), *n = i == nqb - 1 ? QB + rem - first : first;
+}
+
+static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0, int nqv, const next_block *nx)
 {
     /* problem b of a batch: the same descriptor with its pointers moved */
     g3d_nn_attn pb = *in;
     pb.q += b * in->bsq, pb.k += b * in->bsk, pb.v += b * in->bsv, pb.out += b * in->bso;
     const g3d_nn_attn *a = &pb;
-    const int hd = a->hd, hdv = a->hdv, nqv = a->nq - q0 < QB ? a->nq - q0 : QB;
+    const int hd = a->hd, hdv = a->hdv;
     const int nvq = (nqv + 15) / 16, QW = 16 * nvq;
     float *qt = T->qt, *st = T->st, *ot = T->ot, *m = T->m, *l = T->l, *corr = T->t1;
     /* queries of the block, scaled, as columns */
@@ -43,16 +83,26 @@ static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0)
     const int nkb = (kend + KB - 1) / KB, kbs = nkb ? (kend + nkb - 1) / nkb : 0;
     for (int k0 = 0; k0 < kend; k0 += kbs) {
         const int kb = kend - k0 < kbs ? kend - k0 : kbs;
-        for (int r = 0; r < kb; r += NN_MR) {
+        /* S^T = K_blk (scale q)^T: the whole groups of six keys in one kernel call (in runs of
+         * four with the prefetches of the next block between them, where there is one) */
+        const int nfull = kb / NN_MR, run = nx->n ? 4 : nfull;
+        for (int g0 = 0; g0 < nfull; g0 += run) {
+            const int ng = nfull - g0 < run ? nfull - g0 : run;
+            nn_kernel_groups(hd, a->k + (long)(k0 + NN_MR * g0) * a->ldk + h * hd, a->ldk, 1, NN_MR * a->ldk, qt, QB,
+                             st + NN_MR * g0 * QB, QB, NN_MR * QB, nvq, ng, 0);
+            if (k0 == 0) prefetch_rows(in, nx, NN_MR * g0, g0 + ng == nfull ? QB : NN_MR * (g0 + ng));
+        }
+        if (kb % NN_MR) {
             /* a last partial group of keys is redone as the six last keys (the values it writes
              * twice come out the same) rather than copied */
-            if (kb - r < NN_MR && kb >= NN_MR) r = kb - NN_MR;
+            const int r = kb >= NN_MR ? kb - NN_MR : 0;
             const float *ka = a->k + (long)(k0 + r) * a->ldk + h * hd;
             long lda = a->ldk;
-            if (kb - r < NN_MR) {
+            if (kb < NN_MR) {
                 for (int i = 0; i < NN_MR; i++)
-                    for (int d = 0; d < hd; d++) T->edge[i * hd + d] = i < kb - r ? ka[i * a->ldk + d] : 0.0f;
+                    for (int d = 0; d < hd; d++) T->edge[i * hd + d] = i < kb ? ka[i * a->ldk + d] : 0.0f;
                 ka = T->edge, lda = hd;
+                if (k0 == 0) prefetch_rows(in, nx, 0, QB);
             }
             nn_kernel(hd, ka, lda, 1, qt, QB, st + r * QB, QB, nvq, 0);
         }
@@ -68,16 +118,26 @@ static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0)
         if (k0)
             for (int d = 0; d < hdv; d++)
                 for (int i = 0; i < QW; i++) ot[d * QB + i] *= corr[i];
-        /* O^T += V^T P^T, six value channels at a time */
-        for (int d0 = 0; d0 < hdv; d0 += NN_MR) {
-            const float *va = a->v + (long)k0 * a->ldv + h * hdv + d0;
-            long lda = 1, ka = a->ldv;
-            if (hdv - d0 < NN_MR) {
+        /* O^T += V^T P^T, six value channels at a time, in one call. With wide heads (the VAE's
+         * 512 channels) the key block's values are first transposed into consecutive rows: read in
+         * place, each group of six channels took one value from each of the block's rows (480 KB
+         * apart from one another), and the block came from memory 86 times at the pace of its
+         * misses (the value product ran at 68 % of the sgemm rate, 110 % from the copy). Else a last
+         * partial group reads the next head's first channels into the tile's spare rows, or for the
+         * last head (whose row may end there) goes through a zero-padded copy. */
+        const float *va = a->v + (long)k0 * a->ldv + h * hdv;
+        if (T->vt && kb * hdv > VT_MIN) {
+            nn_transpose_tile(va, a->ldv, kb, hdv, T->vt, KB, kb, 1.0f, NULL);
+            nn_kernel_groups(kb, T->vt, KB, 1, NN_MR * KB, st, QB, ot, QB, NN_MR * QB, nvq, rup6(hdv) / NN_MR, k0 > 0);
+        } else {
+            const int direct = h * hdv + rup6(hdv) <= a->heads * hdv, ngv = direct ? rup6(hdv) / NN_MR : hdv / NN_MR;
+            nn_kernel_groups(kb, va, 1, a->ldv, NN_MR, st, QB, ot, QB, NN_MR * QB, nvq, ngv, k0 > 0);
+            if (!direct && hdv % NN_MR) {
+                const int d0 = ngv * NN_MR;
                 for (int i = 0; i < NN_MR; i++)
-                    for (int j = 0; j < kb; j++) T->edge[i * KB + j] = i < hdv - d0 ? va[i + (long)j * a->ldv] : 0.0f;
-                va = T->edge, lda = KB, ka = 1;
+                    for (int j = 0; j < kb; j++) T->edge[i * KB + j] = i < hdv - d0 ? va[d0 + i + (long)j * a->ldv] : 0.0f;
+                nn_kernel(kb, T->edge, KB, 1, st, QB, ot + d0 * QB, QB, nvq, k0 > 0);
             }
-            nn_kernel(kb, va, lda, ka, st, QB, ot + d0 * QB, QB, nvq, k0 > 0);
         }
     }
     if (kend <= 0) memset(ot, 0, sizeof(float) * (size_t)hdv * QB);
@@ -109,15 +169,24 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
     g3d_nn_attn a;
     G3D_TRY(normalise(desc, &a));
     if (a.nq == 0) return G3D_OK;
-    const int nqb = (a.nq + QB - 1) / QB, ntask = a.batch * a.heads * nqb;
     int nth = omp_in_parallel() ? 1 : omp_get_max_threads();
+    /* With long key sets a task is one head and one block of 64 queries (consecutive tasks share
+     * the head's keys and values). With short ones the per-block work is small and the rows of
+     * the queries and outputs weigh: a task is every head of up to 4 blocks, so those rows stay in
+     * cache from one head to the next and the next block's are fetched ahead; fewer blocks where
+     * that would leave less than 16 tasks per thread (the last task keeps the others waiting). */
+    const int shortk = a.nk <= NK_SHORT, nqb = (a.nq + QB - 1) / QB;
+    int g = a.batch * nqb / (16 * nth);
+    g = g < 1 ? 1 : g > 4 ? 4 : g;
+    const int nch = (nqb + g - 1) / g, ntask = shortk ? a.batch * nch : a.batch * a.heads * nqb;
     if (nth > ntask) nth = ntask;
     const int edge = NN_MR * (a.hd > KB ? a.hd : KB);
     int failed = 0;
 #pragma omp parallel num_threads(nth)
     {
         tiles T = {0};
-        size_t nbuf = (size_t)(a.hd + KB + rup6(a.hdv) + 3) * QB + edge;
+        const size_t nvt = a.hdv * KB > VT_MIN ? (size_t)rup6(a.hdv) * KB : 0;
+        size_t nbuf = (size_t)(a.hd + KB + rup6(a.hdv) + 3) * QB + edge + nvt;
         float *buf = aligned_alloc(64, (sizeof(float) * nbuf + 63) / 64 * 64);
         if (!buf) {
 #pragma omp atomic write
@@ -126,10 +195,32 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
             T.qt = buf, T.st = T.qt + (size_t)a.hd * QB, T.ot = T.st + (size_t)KB * QB;
             T.m = T.ot + (size_t)rup6(a.hdv) * QB, T.l = T.m + QB, T.t1 = T.l + QB;
             T.edge = T.t1 + QB;
+            if (nvt) {
+                /* its rows past hdv feed only the tile's spare rows, but must be numbers */
+                T.vt = T.edge + edge;
+                memset(T.vt + (size_t)a.hdv * KB, 0, sizeof(float) * (nvt - (size_t)a.hdv * KB));
+            }
         }
 #pragma omp for schedule(dynamic, 1)
-        for (int t = 0; t < ntask; t++)
-            if (buf) task(&a, &T, t / (a.heads * nqb), t / nqb % a.heads, (t % nqb) * QB);
+        for (int t = 0; t < ntask; t++) {
+            if (!buf) continue;
+            int q0, n;
+            if (!shortk) {
+                const next_block none = {0};
+                query_block(a.nq, t % nqb, &q0, &n);
+                task(&a, &T, t / (a.heads * nqb), t / nqb % a.heads, q0, n, &none);
+                continue;
+            }
+            const int b = t / nch, i0 = t % nch * g, i1 = nqb - i0 < g ? nqb : i0 + g;
+            for (int h = 0; h < a.heads; h++)
+                for (int i = i0; i < i1; i++) {
+                    /* the next block of this head, else the first of the next head */
+                    next_block nx = {b, i + 1 < i1 ? h : h + 1, 0, 0};
+                    if (nx.h < a.heads) query_block(a.nq, i + 1 < i1 ? i + 1 : i0, &nx.q0, &nx.n);
+                    query_block(a.nq, i, &q0, &n);
+                    task(&a, &T, b, h, q0, n, &nx);
+                }
+        }
         free(buf);
     }
     if (failed) return G3D_ERR(G3D_ERR_NOMEM, "attention: cannot allocate the per-thread tiles");
@@ -155,19 +246,23 @@ void g3d_nn_bias_dense_fn(void *ctx, int batch, int head, int q0, int nq, int k0
     }
 }
 
-void g3d_nn_bias_relpos_fn(void *ctx, int batch, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks)
+/* vectorised for the instruction sets of the kernels (it had been 6-10 % of SAM's attention) */
+__attribute__((target_clones("avx512f", "avx2", "default"))) void
+g3d_nn_bias_relpos_fn(void *ctx, int batch, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks)
 {
     const g3d_nn_bias_relpos *r = ctx;
     /* tables are key-major, so the queries of one key are contiguous like the tile's columns */
     const long hb = (long)batch * r->heads + head;
     const float *rh = r->rh + hb * r->kh * r->nq + q0, *rw = r->rw + hb * r->kw * r->nq + q0;
-    for (int j = 0; j < nk; j++) {
-        const float *h = rh + (long)((k0 + j) / r->kw) * r->nq, *w = rw + (long)((k0 + j) % r->kw) * r->nq;
-        float *sj = s + j * ks;
+    /* the key's grid position by counting, not by a division per key */
+    for (int j = 0, ky = k0 / r->kw, kx = k0 % r->kw; j < nk; j++) {
+        const float *restrict h = rh + (long)ky * r->nq, *restrict w = rw + (long)kx * r->nq;
+        float *restrict sj = s + j * ks;
         if (qs == 1)
             for (int i = 0; i < nq; i++) sj[i] += h[i] + w[i];
         else
             for (int i = 0; i < nq; i++) sj[i * qs] += h[i] + w[i];
+        if (++kx == r->kw) kx = 0, ky++;
     }
 }
 

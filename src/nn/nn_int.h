@@ -21,6 +21,11 @@ int nn_isa_force(int isa);
  * All six rows of A and 16nv columns of B must be readable; 1 <= nv <= 4. */
 void nn_kernel(int K, const float *a, long lda, long ka, const float *b, long ldb, float *c, long ldc, int nv, int acc);
 
+/* nn_kernel on ng groups of six rows: group g reads a + g*ga and writes c + g*gc (the same
+ * multiply-adds in the same order as ng calls, with the setup paid once). */
+void nn_kernel_groups(int K, const float *a, long lda, long ka, long ga, const float *b, long ldb, float *c, long ldc,
+                      long gc, int nv, int ng, int acc);
+
 /* ---- the product driver (gemm.c) ------------------------------------------------------- */
 /* Where the columns of B come from. */
 enum {
