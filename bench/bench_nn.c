@@ -324,6 +324,9 @@ int main(int argc, char **argv)
     attn("attention sd1 self", 4096, 4096, 8, 40, 1, 0, 0);
     attn("attention sd2 self", 4096, 4096, 5, 64, 1, 0, 0);
     attn("attention sd1 cross", 4096, 77, 8, 40, 1, 0, 0);
+    attn("attention sd1 cross 32", 1024, 77, 8, 80, 1, 0, 0);
+    attn("attention sd1 cross 16", 256, 77, 8, 160, 1, 0, 0);
+    attn("attention sd1 self 32", 1024, 1024, 8, 80, 1, 0, 0);
     attn("attention sam-b window", 196, 196, 12, 64, 25, 1, 14);
     attn("attention sam-b global", 4096, 4096, 12, 64, 1, 1, 64);
     attn("attention vae mid", 4096, 4096, 1, 512, 1, 0, 0);
