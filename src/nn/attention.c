@@ -50,17 +50,18 @@ static inline __attribute__((always_inline)) void prefetch_rows(const g3d_nn_att
     }
 }
 
-/* Block i of the queries: the vectors of 16 queries the problem needs shared out as evenly as
- * the blocks of at most four allow, the wider blocks first (SAM's windows of 196 tokens are
- * 64 + 48 + 48 + 36 queries: products of four and three vectors, where blocks of 64 had left
- * 64 + 64 + 48 + 20, the last one two vectors wide and 12 of its 32 lanes idle). No block is
- * one vector wide unless the whole problem is. */
+/* Block i of the queries: blocks of QB, except that a last one of at most 16 queries and the
+ * block before it split their queries into two of at least 17 (as many vector lanes, but no
+ * products one vector wide: SAM's windows of 196 tokens had ended in a block of 4). */
 static void query_block(int nq, int i, int *q0, int *n)
 {
-    const int nv = (nq + 15) / 16, nqb = (nq + QB - 1) / QB, base = nv / nqb, extra = nv % nqb;
-    *q0 = 16 * (i * base + (i < extra ? i : extra));
-    const int w = 16 * (base + (i < extra));
-    *n = nq - *q0 < w ? nq - *q0 : w;
+    const int nqb = (nq + QB - 1) / QB, rem = nq % QB;
+    if (nqb < 2 || rem == 0 || rem > 16 || i < nqb - 2) {
+        *q0 = i * QB, *n = nq - *q0 < QB ? nq - *q0 : QB;
+        return;
+    }
+    const int first = ((QB + rem) / 2 + 15) / 16 * 16;
+    *q0 = (nqb - 2) * QB + (i == nqb - 1 ? first : 0), *n = i == nqb - 1 ? QB + rem - first : first;
 }
 
 static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0, int nqv, const next_block *nx)
@@ -131,12 +132,7 @@ static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0, in
         } else {
             const int direct = h * hdv + rup6(hdv) <= a->heads * hdv, ngv = direct ? rup6(hdv) / NN_MR : hdv / NN_MR;
             nn_kernel_groups(kb, va, 1, a->ldv, NN_MR, st, QB, ot, QB, NN_MR * QB, nvq, ngv, k0 > 0);
-            if (!direct && hdv % NN_MR && hdv > NN_MR && k0 == 0) {
-                /* the first key block writes rather than adds: the last head's partial group is
-                 * redone as its six last channels (rewriting some with the same values), read in
-                 * place instead of through a copy (4 % of SD's cross-attention with the copy) */
-                nn_kernel(kb, va + hdv - NN_MR, 1, a->ldv, st, QB, ot + (hdv - NN_MR) * QB, QB, nvq, 0);
-            } else if (!direct && hdv % NN_MR) {
+            if (!direct && hdv % NN_MR) {
                 const int d0 = ngv * NN_MR;
                 for (int i = 0; i < NN_MR; i++)
                     for (int j = 0; j < kb; j++) T->edge[i * KB + j] = i < hdv - d0 ? va[d0 + i + (long)j * a->ldv] : 0.0f;
