@@ -20,7 +20,7 @@
 #include <time.h>
 #include <unistd.h>
 
-static int g_reps = 5, g_threads;
+static int g_reps = 5, g_threads, g_ran;
 static const char *g_filter;
 static float *g_a, *g_b, *g_c;
 
@@ -122,6 +122,7 @@ static void run(const char *name, const char *shape, double flops, case_fn fn, v
     qsort(ratio, reps, sizeof *ratio, cmp_double);
     qsort(cratio, reps, sizeof *cratio, cmp_double);
     double tm = t[reps / 2], cm = cpu[reps / 2], rm = ratio[reps / 2], crm = cratio[reps / 2];
+    g_ran++;
     if (flops > 0) note_kind(name, rm);
     if (flops > 0)
         printf("| %-26s | %-36s | %8.2f | %9.2f | %9.2f | %7.1f | %5.0f %% | %7.0f %% |\n", name, shape, flops * 1e-9,
@@ -292,10 +293,18 @@ int main(int argc, char **argv)
     }
     g3d_process_setup(argv);
     for (int i = 1; i < argc; i++) {
-        if (!strcmp(argv[i], "--reps") && i + 1 < argc)
+        if (!strcmp(argv[i], "--reps") && i + 1 < argc) {
             g_reps = atoi(argv[++i]);
-        else
+        } else if (argv[i][0] == '-' || g_filter) {
+            fprintf(stderr, "usage: bench_nn [filter] [--reps N]\n");
+            return 2;
+        } else {
             g_filter = argv[i];
+        }
+    }
+    if (g_reps < 1) {
+        fprintf(stderr, "bench_nn: --reps needs a positive count\n");
+        return 2;
     }
     g_threads = omp_get_max_threads();
     openblas_set_num_threads(g_threads);
@@ -374,6 +383,10 @@ int main(int argc, char **argv)
     misc("irfft2 lama", "192 x 64x64", 3, 192, 64, 64);
     /* per kind: how many shapes, their median fraction of sgemm and the lowest; 3x3 "conv3w"
      * (Winograd) counts the direct convolution's multiply-adds, so it can exceed 100 % */
+    if (!g_ran) {
+        fprintf(stderr, "bench_nn: no operator's name contains \"%s\"\n", g_filter);
+        return 1;
+    }
     printf("\nper op kind (sgemm %.0f-%.0f GFLOP/s during the run):\n", g_sgemm_lo, g_sgemm_hi);
     printf("| %-10s | %6s | %14s | %10s |\n", "kind", "shapes", "median sgemm", "lowest");
     printf("|------------|--------|----------------|------------|\n");
