@@ -370,7 +370,7 @@ int main(int argc, char **argv)
     conv("conv1 sd proj 320", 320, 320, 1, 1, 0, 64, 64, 1, G3D_PAD_ZEROS, 0, 0, 0);
     conv("conv1 lama fu 384", 384, 384, 1, 1, 0, 64, 33, 1, G3D_PAD_ZEROS, 0, 0, 0);
     conv("conv1 lama st 384->192", 384, 192, 1, 1, 0, 64, 64, 1, G3D_PAD_ZEROS, 0, 0, 0);
-    conv("conv1 dpt-s 64 @296", 64, 64, 1, 1, 0, 296, 296, 1, G3D_PAD_ZEROS, 0, 0, 0);
+    conv("conv1 dpt-s 64 @148", 64, 64, 1, 1, 0, 148, 148, 1, G3D_PAD_ZEROS, 0, 0, 0);
     conv("conv dw3 tinyvit 256", 256, 256, 3, 1, 1, 256, 256, 256, G3D_PAD_ZEROS, 0, 0, 0);
     conv("convT lama k3s2 512->256", 512, 256, 3, 2, 1, 64, 64, 1, G3D_PAD_ZEROS, 1, 1, 1);
     conv("convT sam k2s2 256->64", 256, 64, 2, 2, 0, 64, 64, 1, G3D_PAD_ZEROS, 1, 0, 1);
