@@ -55,13 +55,30 @@ double g3d_depth_median(const g3d_image *depth)
     return m;
 }
 
+/* The depth a view's estimator completes its holes from: the cloud's depth (depth, covered
+ * where mask >= 0.5), with the near side of every depth edge that runs into a hole moved to the
+ * far side (g3d_align_far_side), so that a disocclusion is completed from what lies behind its
+ * occluder, not interpolated between the two. Plain copy with the edge test off. */
+static g3d_status far_side_known(const g3d_image *depth, const g3d_image *mask, const g3d_world_params *p, g3d_image *out)
+{
+    g3d_image far = {0};
+    G3D_TRY(g3d_image_clone(out, depth));
+    if (!(p->align.edge_ratio > 0)) return G3D_OK;
+    g3d_status rc = g3d_align_far_side(depth, mask, p->align.edge_ratio, &far, NULL);
+    for (size_t k = 0; rc == G3D_OK && k < g3d_image_size(out); k++)
+        if (far.data[k] > 0) out->data[k] = far.data[k];
+    g3d_image_free(&far);
+    if (rc != G3D_OK) g3d_image_free(out);
+    return rc;
+}
+
 /* The input's depth with its gaps (a stereo matcher's occlusions, a sensor's dropouts) filled
  * as a new view's holes are: estimated, then aligned to the known depth around them. Left
  * unlifted, those pixels would be holes in the world from every camera, the input's too. */
 static g3d_status complete_input_depth(const g3d_frame *in, const g3d_depth_estimator *depth, const g3d_world_params *p,
                                        g3d_image *out)
 {
-    g3d_image holes = {0}, valid = {0}, est = {0};
+    g3d_image holes = {0}, valid = {0}, est = {0}, known = {0};
     size_t n = g3d_image_size(&in->depth), nh = 0;
     G3D_TRY(g3d_image_clone(out, &in->depth));
     for (size_t k = 0; k < n; k++) nh += !(in->depth.data[k] > 0);
@@ -73,13 +90,15 @@ static g3d_status complete_input_depth(const g3d_frame *in, const g3d_depth_esti
         valid.data[k] = 1.0f - holes.data[k];
     }
     g3d_intrinsics K = in->cam.K;
-    if (rc == G3D_OK) rc = depth->estimate(depth->ctx, &in->rgb, &in->depth, &holes, &est, &K);
+    if (rc == G3D_OK) rc = far_side_known(&in->depth, &valid, p, &known);
+    if (rc == G3D_OK) rc = depth->estimate(depth->ctx, &in->rgb, &known, &holes, &est, &K);
     if (rc == G3D_OK) rc = g3d_align_depth(&est, &in->depth, &valid, &p->align, NULL);
     for (size_t k = 0; rc == G3D_OK && k < n; k++)
         if (holes.data[k] > 0.5f) out->data[k] = est.data[k];
     g3d_image_free(&holes);
     g3d_image_free(&valid);
     g3d_image_free(&est);
+    g3d_image_free(&known);
     return rc;
 }
 
@@ -143,7 +162,7 @@ static g3d_status world_step(g3d_world *w, int i, const g3d_inpainter *inpaint, 
 {
     g3d_world_step *st = &w->steps[i];
     const g3d_camera *cam = &w->cams[i];
-    g3d_image rgb = {0}, cloud_d = {0}, mask = {0}, holes = {0}, est = {0};
+    g3d_image rgb = {0}, cloud_d = {0}, mask = {0}, holes = {0}, est = {0}, known = {0};
     double t = g3d_time_now();
     g3d_status rc = g3d_cloud_render(&w->cloud, cam, &p->render, &rgb, &cloud_d, &mask);
     st->seconds_reproject = g3d_time_now() - t;
@@ -162,7 +181,8 @@ static g3d_status world_step(g3d_world *w, int i, const g3d_inpainter *inpaint, 
     if (rc != G3D_OK) goto done;
     t = g3d_time_now();
     g3d_intrinsics K = cam->K;
-    rc = depth->estimate(depth->ctx, &rgb, &cloud_d, nh ? &holes : NULL, &est, &K);
+    rc = nh ? far_side_known(&cloud_d, &mask, p, &known) : g3d_image_clone(&known, &cloud_d);
+    if (rc == G3D_OK) rc = depth->estimate(depth->ctx, &rgb, &known, nh ? &holes : NULL, &est, &K);
     st->seconds_depth = g3d_time_now() - t;
     if (rc != G3D_OK) goto done;
     t = g3d_time_now();
@@ -185,6 +205,7 @@ done:
     g3d_image_free(&mask);
     g3d_image_free(&holes);
     g3d_image_free(&est);
+    g3d_image_free(&known);
     return rc;
 }
 
