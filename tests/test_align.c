@@ -233,6 +233,10 @@ TEST(a_disocclusion_follows_its_far_side)
         err[edges] = two_depth_error(&est, &truth, &mask);
         g3d_image_free(&est);
     }
+    ap.edge_ratio = 0.9f;
+    g3d_image_clone(&est, &truth);
+    CHECK_FAILS(g3d_align_depth(&est, &cloud, &mask, &ap, NULL));
+    g3d_image_free(&est);
     printf("  alignment: hole error %.2f %% from both sides, %.3f %% from the far side\n", 100 * err[0], 100 * err[1]);
     CHECK(err[0] > 0.05);
     CHECK(err[1] < 0.005);

@@ -6,7 +6,8 @@
  *      background behind its foreground too.
  *   1. For each pose of the trajectory: render the cloud (z-buffer), inpaint the holes,
  *      estimate the view's depth, align it to the cloud along the camera rays (align.h),
- *      lift only the new pixels.
+ *      lift only the new pixels. A hole that a depth edge runs into is completed and aligned
+ *      from the edge's far side (g3d_align_far_side): what it uncovers lies behind the occluder.
  *      Side steps (side_from) do the same at a lower resolution and, with side_carve, do not
  *      lift the hole pixels that a path view saw through (a point in front of its depth).
  *   2. M extra views on small orbits around the poses are rendered from the final cloud with
@@ -44,8 +45,8 @@ typedef struct g3d_world_params {
                                     their inpainting is most of their cost; >= 16 (384) */
     double side_carve;           /* > 0: a side step does not lift a hole pixel whose point a path
                                     view sees in front of its own depth by more than this fraction
-                                    of that depth (that view saw through it): better held-out
-                                    views, more empty pixels close up; 0..1, 0 = off (0) */
+                                    of that depth (that view saw through it: an inpainted guess
+                                    that would hide what the path saw); 0..1, 0 = off (0.02) */
     g3d_cloud_render_params render;
     g3d_align_params align;
     g3d_progress progress;       /* stage "world": step per pose; stopping returns G3D_CANCELLED */

@@ -92,6 +92,8 @@ g3d_status g3d_align_depth(g3d_image *depth_new, const g3d_image *depth_cloud, c
     if (depth_cloud->w != w || depth_cloud->h != h || mask->w != w || mask->h != h)
         return G3D_ERR(G3D_ERR_MISMATCH, "align: depth %dx%d, cloud depth %dx%d and mask %dx%d differ", w, h, depth_cloud->w,
                        depth_cloud->h, mask->w, mask->h);
+    if (!(p->edge_ratio == 0 || p->edge_ratio > 1))
+        return G3D_ERR(G3D_ERR_ARG, "align: depth edge ratio %g (need 0 = off, or > 1)", p->edge_ratio);
     float *r = malloc(sizeof(float) * n), *tmp = malloc(sizeof(float) * n);
     uint8_t *known = calloc(n, 1);
     g3d_image far = {0};

@@ -21,6 +21,7 @@ void g3d_world_params_default(g3d_world_params *p)
     p->extra_angle_deg = 5.0;
     p->hole_stride = 2;
     p->side_max_side = 384;
+    p->side_carve = 0.02;
     g3d_cloud_render_params_default(&p->render);
     g3d_align_params_default(&p->align);
 }
@@ -78,8 +79,14 @@ static g3d_status far_side_known(const g3d_image *depth, const g3d_image *mask, 
 static g3d_status complete_input_depth(const g3d_frame *in, const g3d_depth_estimator *depth, const g3d_world_params *p,
                                        g3d_image *out)
 {
-    g3d_image holes = {0}, valid = {0}, est = {0}, known = {0};
+    g3d_image holes = {0}, valid = {0}, est = {0};
     size_t n = g3d_image_size(&in->depth), nh = 0;
+    /* From both sides, unlike a new view's holes (g3d_align_far_side): an input gap has its real
+     * colour and is as often part of the near surface as of the far one (Middlebury's gaps on
+     * the motorcycle itself), which depth completion cannot tell; completed from the far side
+     * they cost 0.35 dB at the right view (docs/explore.md). */
+    g3d_align_params ap = p->align;
+    ap.edge_ratio = 0;
     G3D_TRY(g3d_image_clone(out, &in->depth));
     for (size_t k = 0; k < n; k++) nh += !(in->depth.data[k] > 0);
     if (!nh || nh == n) return G3D_OK;
@@ -90,15 +97,13 @@ static g3d_status complete_input_depth(const g3d_frame *in, const g3d_depth_esti
         valid.data[k] = 1.0f - holes.data[k];
     }
     g3d_intrinsics K = in->cam.K;
-    if (rc == G3D_OK) rc = far_side_known(&in->depth, &valid, p, &known);
-    if (rc == G3D_OK) rc = depth->estimate(depth->ctx, &in->rgb, &known, &holes, &est, &K);
-    if (rc == G3D_OK) rc = g3d_align_depth(&est, &in->depth, &valid, &p->align, NULL);
+    if (rc == G3D_OK) rc = depth->estimate(depth->ctx, &in->rgb, &in->depth, &holes, &est, &K);
+    if (rc == G3D_OK) rc = g3d_align_depth(&est, &in->depth, &valid, &ap, NULL);
     for (size_t k = 0; rc == G3D_OK && k < n; k++)
         if (holes.data[k] > 0.5f) out->data[k] = est.data[k];
     g3d_image_free(&holes);
     g3d_image_free(&valid);
     g3d_image_free(&est);
-    g3d_image_free(&known);
     return rc;
 }
 
@@ -221,6 +226,8 @@ g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int
     if (p->hole_stride < 1 || p->hole_stride > 16) return G3D_ERR(G3D_ERR_ARG, "world: hole stride %d (need 1..16)", p->hole_stride);
     if (p->extra_views < 0 || p->extra_views > 10000) return G3D_ERR(G3D_ERR_ARG, "world: %d extra views (need 0..10000)", p->extra_views);
     if (p->side_max_side < 16) return G3D_ERR(G3D_ERR_ARG, "world: side steps' longer side %d (need >= 16)", p->side_max_side);
+    if (!(p->align.edge_ratio == 0 || p->align.edge_ratio > 1))
+        return G3D_ERR(G3D_ERR_ARG, "world: depth edge ratio %g (need 0 = off, or > 1)", p->align.edge_ratio);
     if (!(p->side_carve >= 0 && p->side_carve <= 1))
         return G3D_ERR(G3D_ERR_ARG, "world: side-step carving tolerance %g (need 0..1)", p->side_carve);
     /* the path: the poses before the side steps */
@@ -299,6 +306,7 @@ static cJSON *step_json(int i, const g3d_world_step *s)
     cJSON_AddNumberToObject(o, "points_added", (double)s->points_added);
     cJSON_AddNumberToObject(o, "correspondences", (double)s->align.correspondences);
     cJSON_AddNumberToObject(o, "outliers", (double)s->align.rejected);
+    cJSON_AddNumberToObject(o, "near_side", (double)s->align.near_side);
     cJSON_AddNumberToObject(o, "residual_before", s->align.residual_before);
     cJSON_AddNumberToObject(o, "residual_after", s->align.residual_after);
     cJSON_AddNumberToObject(o, "median_depth_ratio", s->align.median_ratio);
@@ -436,6 +444,7 @@ static void steps_from_log(const cJSON *root, g3d_world *w)
         st->points_added = (int64_t)json_num(s, "points_added");
         st->align.correspondences = (int64_t)json_num(s, "correspondences");
         st->align.rejected = (int64_t)json_num(s, "outliers");
+        st->align.near_side = (int64_t)json_num(s, "near_side");
         st->align.residual_before = json_num(s, "residual_before");
         st->align.residual_after = json_num(s, "residual_after");
         st->align.median_ratio = json_num(s, "median_depth_ratio");
