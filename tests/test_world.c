@@ -213,18 +213,25 @@ static int64_t seen_through(const g3d_world *w, int from, double tol, int64_t *l
     return n;
 }
 
+/* The procedural room at 96 x 72 with the weight-free plug-ins; returns a step of a quarter of
+ * the median depth, the exploration set's. */
+static double side_step_setup(g3d_frame *f, g3d_inpainter *ip, g3d_depth_estimator *de)
+{
+    make_frame(f, 96, 72);
+    g3d_depth_estimator_completion_create(de);
+    g3d_inpainter_classic_create(NULL, ip);
+    return 0.25 * g3d_depth_median(&f->depth);
+}
+
 /* Side steps (the exploration set's in g3d_generate): at most side_max_side pixels, no hole
  * point lifted where the input saw through it, extra views around the path only, and bad
  * side-step parameters refused. */
 TEST(side_steps_fill_only_what_the_path_left)
 {
     g3d_frame f;
-    make_frame(&f, 96, 72);
     g3d_inpainter ip;
     g3d_depth_estimator de;
-    g3d_depth_estimator_completion_create(&de);
-    g3d_inpainter_classic_create(NULL, &ip);
-    double d = 0.25 * g3d_depth_median(&f.depth);
+    double d = side_step_setup(&f, &ip, &de);
     /* the input, a turn (the path), then steps sideways and forward with turns */
     g3d_mat4 poses[5] = {g3d_mat4_identity(), g3d_pose_yaw_pitch(15, 0, g3d_v3(0, 0, 0)),
                          g3d_pose_yaw_pitch(-15, 0, g3d_v3(d, 0, 0)), g3d_pose_yaw_pitch(15, 10, g3d_v3(-d, 0, d)),
@@ -278,12 +285,9 @@ TEST(side_steps_fill_only_what_the_path_left)
 TEST(disocclusions_are_completed_from_behind)
 {
     g3d_frame f;
-    make_frame(&f, 96, 72);
     g3d_inpainter ip;
     g3d_depth_estimator de;
-    g3d_depth_estimator_completion_create(&de);
-    g3d_inpainter_classic_create(NULL, &ip);
-    double d = 0.25 * g3d_depth_median(&f.depth);
+    double d = side_step_setup(&f, &ip, &de);
     g3d_mat4 poses[4] = {g3d_mat4_identity(), g3d_pose_yaw_pitch(0, 0, g3d_v3(d, 0, 0)), g3d_pose_yaw_pitch(0, 0, g3d_v3(-d, 0, 0)),
                          g3d_pose_yaw_pitch(0, 0, g3d_v3(0, -0.5 * d, d))};
     g3d_world_params wp;
