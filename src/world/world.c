@@ -20,7 +20,7 @@ void g3d_world_params_default(g3d_world_params *p)
     p->extra_views = 10;
     p->extra_angle_deg = 5.0;
     p->hole_stride = 2;
-    p->side_max_side = 384;
+    p->side_max_side = 512;
     p->side_carve = 0.02;
     g3d_cloud_render_params_default(&p->render);
     g3d_align_params_default(&p->align);
