@@ -42,7 +42,8 @@ typedef struct g3d_align_stats {
     double residual_before;      /* mean |new - cloud| / cloud over the correspondences */
     double residual_after;       /* the same after alignment (0 when all are kept: they are pinned) */
     double median_ratio;         /* median cloud/new depth ratio */
-    int64_t near_side;           /* boundary pixels on the near side of a depth edge (not used) */
+    int64_t near_side;           /* boundary pixels on the near side of a depth edge (edge_ratio),
+                                    not used as correspondences */
 } g3d_align_stats;
 
 /* depth_new (h, w, 1): the new view's full depth, corrected in place at the hole pixels
