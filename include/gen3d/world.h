@@ -6,10 +6,11 @@
  *      background behind its foreground too.
  *   1. For each pose of the trajectory: render the cloud (z-buffer), inpaint the holes,
  *      estimate the view's depth, align it to the cloud along the camera rays (align.h),
- *      lift only the new pixels. A hole that a depth edge runs into is completed and aligned
- *      from the edge's far side (g3d_align_far_side): what it uncovers lies behind the occluder.
- *      Side steps (side_from) do the same at a lower resolution and, with side_carve, do not
- *      lift the hole pixels that a path view saw through (a point in front of its depth).
+ *      lift only the new pixels.
+ *      Side steps (side_from) do the same at a lower resolution, complete and align a hole that
+ *      a depth edge runs into from the edge's far side (g3d_align_far_side with align.edge_ratio:
+ *      what a step uncovers lies behind the occluder) and, with side_carve, do not lift the
+ *      hole pixels that a path view saw through (a point in front of its depth).
  *   2. M extra views on small orbits around the poses are rendered from the final cloud with
  *      their validity masks; they are not inpainted (training uses their valid pixels only).
  *
