@@ -157,10 +157,119 @@ TEST(completion)
     free_setup(&s);
 }
 
+/* A two-depth hole: an occluder at 1 m (x < 30), the background at 3 m behind it, which the
+ * cloud covers from x = 50 on; the hole between is background that the occluder hid. */
+#define TW 80
+#define TH 40
+static void two_depth_hole(g3d_image *truth, g3d_image *cloud, g3d_image *mask)
+{
+    g3d_image_create(truth, TW, TH, 1);
+    g3d_image_create(cloud, TW, TH, 1);
+    g3d_image_create(mask, TW, TH, 1);
+    for (int y = 0; y < TH; y++)
+        for (int x = 0; x < TW; x++) {
+            size_t i = (size_t)y * TW + x;
+            truth->data[i] = x < 30 ? 1.0f : 3.0f;
+            mask->data[i] = x < 30 || x >= 50;
+            cloud->data[i] = mask->data[i] > 0.5f ? truth->data[i] : 0;
+        }
+}
+
+/* Mean relative error of d over the hole of two_depth_hole. */
+static double two_depth_error(const g3d_image *d, const g3d_image *truth, const g3d_image *mask)
+{
+    double e = 0;
+    size_t n = 0;
+    for (size_t i = 0; i < g3d_image_size(d); i++)
+        if (mask->data[i] < 0.5f) { e += fabs(d->data[i] - truth->data[i]) / truth->data[i]; n++; }
+    return e / n;
+}
+
+TEST(the_near_side_of_a_depth_edge_is_found)
+{
+    g3d_image truth, cloud, mask, far;
+    two_depth_hole(&truth, &cloud, &mask);
+    int64_t n_near = 0;
+    CHECK_OK(g3d_align_far_side(&cloud, &mask, 1.1f, &far, &n_near));
+    CHECK(n_near == TH); /* the occluder's column next to the hole */
+    int wrong = 0;
+    for (int y = 0; y < TH; y++)
+        for (int x = 0; x < TW; x++) {
+            float f = far.data[(size_t)y * TW + x];
+            /* the occluder's last 5 columns carry the far side's depth, nothing else does */
+            wrong += x >= 25 && x < 30 ? fabsf(f - 3.0f) > 1e-6f : f != 0;
+        }
+    CHECK(wrong == 0);
+    g3d_image_free(&far);
+    /* A floor receding at a grazing angle (inverse depth falling linearly across the view, from
+     * 2 m to 5.4 m) has a hole as deep across as the edge above, but no depth edge. */
+    for (int y = 0; y < TH; y++)
+        for (int x = 0; x < TW; x++)
+            if (mask.data[(size_t)y * TW + x] > 0.5f) cloud.data[(size_t)y * TW + x] = 1.0f / (0.5f - 0.004f * x);
+    CHECK_OK(g3d_align_far_side(&cloud, &mask, 1.1f, &far, &n_near));
+    CHECK(n_near == 0);
+    g3d_image_free(&far);
+    CHECK_FAILS(g3d_align_far_side(&cloud, &mask, 1.0f, &far, NULL));
+    g3d_image_free(&truth);
+    g3d_image_free(&cloud);
+    g3d_image_free(&mask);
+}
+
+TEST(a_disocclusion_follows_its_far_side)
+{
+    g3d_image truth, cloud, mask, est, known, far;
+    two_depth_hole(&truth, &cloud, &mask);
+    /* Alignment: the estimated depth is right on the occluder and 20 % short behind it. */
+    g3d_align_params ap;
+    g3d_align_params_default(&ap);
+    double err[2];
+    for (int edges = 0; edges < 2; edges++) {
+        g3d_image_clone(&est, &truth);
+        for (size_t i = 0; i < g3d_image_size(&est); i++) if (truth.data[i] > 2) est.data[i] *= 0.8f;
+        ap.edge_ratio = edges ? 1.1f : 0.0f;
+        g3d_align_stats st;
+        CHECK_OK(g3d_align_depth(&est, &cloud, &mask, &ap, &st));
+        CHECK(st.near_side == (edges ? TH : 0));
+        err[edges] = two_depth_error(&est, &truth, &mask);
+        g3d_image_free(&est);
+    }
+    ap.edge_ratio = 0.9f;
+    g3d_image_clone(&est, &truth);
+    CHECK_FAILS(g3d_align_depth(&est, &cloud, &mask, &ap, NULL));
+    g3d_image_free(&est);
+    printf("  alignment: hole error %.2f %% from both sides, %.3f %% from the far side\n", 100 * err[0], 100 * err[1]);
+    CHECK(err[0] > 0.05);
+    CHECK(err[1] < 0.005);
+    /* Completion from the cloud's depth with the far side written over the near side. */
+    g3d_image holes;
+    g3d_image_create(&holes, TW, TH, 1);
+    for (size_t i = 0; i < g3d_image_size(&holes); i++) holes.data[i] = mask.data[i] < 0.5f;
+    g3d_image_clone(&known, &cloud);
+    CHECK_OK(g3d_depth_complete(&known, &holes));
+    err[0] = two_depth_error(&known, &truth, &mask);
+    g3d_image_free(&known);
+    g3d_image_clone(&known, &cloud);
+    CHECK_OK(g3d_align_far_side(&cloud, &mask, 1.1f, &far, NULL));
+    for (size_t i = 0; i < g3d_image_size(&known); i++) if (far.data[i] > 0) known.data[i] = far.data[i];
+    CHECK_OK(g3d_depth_complete(&known, &holes));
+    err[1] = two_depth_error(&known, &truth, &mask);
+    printf("  completion: hole error %.2f %% from both sides, %.3f %% from the far side\n", 100 * err[0], 100 * err[1]);
+    CHECK(err[0] > 0.1);
+    CHECK(err[1] < 0.005);
+    g3d_image_free(&known);
+    g3d_image_free(&far);
+    g3d_image_free(&holes);
+    g3d_image_free(&truth);
+    g3d_image_free(&cloud);
+    g3d_image_free(&mask);
+}
+
 int main(void)
 {
     RUN(alignment_removes_smooth_depth_error);
     RUN(outliers_are_rejected);
     RUN(completion);
+    RUN(the_near_side_of_a_depth_edge_is_found);
+    RUN(a_disocclusion_follows_its_far_side);
     return test_summary();
 }

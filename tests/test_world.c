@@ -191,18 +191,47 @@ TEST(bad_trajectories)
     g3d_frame_free(&f);
 }
 
+/* Of the points that the views from `from` on lifted, how many lie in front of the depth of one
+ * of the views before `from` (that view saw through them) by more than tol of that depth. */
+static int64_t seen_through(const g3d_world *w, int from, double tol, int64_t *lifted)
+{
+    int64_t n = 0;
+    *lifted = 0;
+    for (int64_t k = 0; k < w->cloud.n; k++) {
+        if (w->cloud.view[k] < from) continue;
+        ++*lifted;
+        g3d_vec3 x = g3d_v3(w->cloud.xyz[3 * k], w->cloud.xyz[3 * k + 1], w->cloud.xyz[3 * k + 2]);
+        for (int j = 0; j < from; j++) {
+            double u, v, z;
+            if (!g3d_camera_project(&w->cams[j], x, &u, &v, &z)) continue;
+            long iu = lround(u), iv = lround(v);
+            if (iu < 0 || iv < 0 || iu >= w->depth[j].w || iv >= w->depth[j].h) continue;
+            float dz = w->depth[j].data[iv * w->depth[j].w + iu];
+            n += dz > 0 && z < dz * (1 - tol) - 1e-6;
+        }
+    }
+    return n;
+}
+
+/* The procedural room at 96 x 72 with the weight-free plug-ins; returns a step of a quarter of
+ * the median depth, the exploration set's. */
+static double side_step_setup(g3d_frame *f, g3d_inpainter *ip, g3d_depth_estimator *de)
+{
+    make_frame(f, 96, 72);
+    g3d_depth_estimator_completion_create(de);
+    g3d_inpainter_classic_create(NULL, ip);
+    return 0.25 * g3d_depth_median(&f->depth);
+}
+
 /* Side steps (the exploration set's in g3d_generate): at most side_max_side pixels, no hole
  * point lifted where the input saw through it, extra views around the path only, and bad
  * side-step parameters refused. */
 TEST(side_steps_fill_only_what_the_path_left)
 {
     g3d_frame f;
-    make_frame(&f, 96, 72);
     g3d_inpainter ip;
     g3d_depth_estimator de;
-    g3d_depth_estimator_completion_create(&de);
-    g3d_inpainter_classic_create(NULL, &ip);
-    double d = 0.25 * g3d_depth_median(&f.depth);
+    double d = side_step_setup(&f, &ip, &de);
     /* the input, a turn (the path), then steps sideways and forward with turns */
     g3d_mat4 poses[5] = {g3d_mat4_identity(), g3d_pose_yaw_pitch(15, 0, g3d_v3(0, 0, 0)),
                          g3d_pose_yaw_pitch(-15, 0, g3d_v3(d, 0, 0)), g3d_pose_yaw_pitch(15, 10, g3d_v3(-d, 0, d)),
@@ -228,23 +257,10 @@ TEST(side_steps_fill_only_what_the_path_left)
         for (int k = 0; k < w.n_extra && k < path.n_extra; k++)
             CHECK(g3d_mat4_max_abs_diff(w.extra_cams[k].c2w, path.extra_cams[k].c2w) < 1e-12);
         /* every point a side step lifted lies behind the depth of the path views that see it */
-        int64_t lifted = 0, seen_through = 0;
-        for (int64_t k = 0; k < w.cloud.n; k++) {
-            if (w.cloud.view[k] < 2) continue;
-            lifted++;
-            g3d_vec3 x = g3d_v3(w.cloud.xyz[3 * k], w.cloud.xyz[3 * k + 1], w.cloud.xyz[3 * k + 2]);
-            for (int j = 0; j < 2; j++) {
-                double u, v, z;
-                if (!g3d_camera_project(&w.cams[j], x, &u, &v, &z)) continue;
-                long iu = lround(u), iv = lround(v);
-                if (iu < 0 || iv < 0 || iu >= w.depth[j].w || iv >= w.depth[j].h) continue;
-                float dz = w.depth[j].data[iv * w.depth[j].w + iu];
-                seen_through += dz > 0 && z < dz * (1 - wp.side_carve) - 1e-6;
-            }
-        }
-        printf("  side steps: %lld points lifted, %lld seen through by the path\n", (long long)lifted, (long long)seen_through);
+        int64_t lifted, through = seen_through(&w, 2, wp.side_carve, &lifted);
+        printf("  side steps: %lld points lifted, %lld seen through by the path\n", (long long)lifted, (long long)through);
         CHECK(lifted > 0);
-        CHECK(seen_through == 0);
+        CHECK(through == 0);
     }
     g3d_world_free(&w);
     g3d_world_free(&path);
@@ -256,6 +272,41 @@ TEST(side_steps_fill_only_what_the_path_left)
     CHECK_FAILS(g3d_world_generate(&f, poses, 5, &ip, &de, NULL, &wp, 3, &w));
     wp.side_carve = NAN;
     CHECK_FAILS(g3d_world_generate(&f, poses, 5, &ip, &de, NULL, &wp, 3, &w));
+    wp.side_carve = 0.02;
+    wp.align.edge_ratio = 1.0f;
+    CHECK_FAILS(g3d_world_generate(&f, poses, 5, &ip, &de, NULL, &wp, 3, &w));
+    g3d_inpainter_free(&ip);
+    g3d_frame_free(&f);
+}
+
+/* Side steps sideways past the box: what they uncover beside it is completed from the far side
+ * of its edges, so without carving far fewer of their points float in front of what the path
+ * saw than when the holes are completed from both sides. */
+TEST(disocclusions_are_completed_from_behind)
+{
+    g3d_frame f;
+    g3d_inpainter ip;
+    g3d_depth_estimator de;
+    double d = side_step_setup(&f, &ip, &de);
+    g3d_mat4 poses[4] = {g3d_mat4_identity(), g3d_pose_yaw_pitch(0, 0, g3d_v3(d, 0, 0)), g3d_pose_yaw_pitch(0, 0, g3d_v3(-d, 0, 0)),
+                         g3d_pose_yaw_pitch(0, 0, g3d_v3(0, -0.5 * d, d))};
+    g3d_world_params wp;
+    g3d_world_params_default(&wp);
+    wp.extra_views = 0;
+    wp.side_from = 1;
+    wp.side_carve = 0;
+    int64_t through[2], lifted[2];
+    for (int edges = 0; edges < 2; edges++) {
+        g3d_world w;
+        wp.align.edge_ratio = edges ? 1.1f : 0.0f;
+        CHECK_OK(g3d_world_generate(&f, poses, 4, &ip, &de, NULL, &wp, 3, &w));
+        through[edges] = w.n_views == 4 ? seen_through(&w, 1, 0.02, &lifted[edges]) : -1;
+        g3d_world_free(&w);
+    }
+    printf("  side-step points in front of the input's surfaces: %lld of %lld from both sides, %lld of %lld from the "
+           "far side\n", (long long)through[0], (long long)lifted[0], (long long)through[1], (long long)lifted[1]);
+    CHECK(through[0] > 20);
+    CHECK(through[1] >= 0 && through[1] * 4 < through[0]);
     g3d_inpainter_free(&ip);
     g3d_frame_free(&f);
 }
@@ -267,5 +318,6 @@ int main(void)
     RUN(world_folder_round_trip);
     RUN(bad_trajectories);
     RUN(side_steps_fill_only_what_the_path_left);
+    RUN(disocclusions_are_completed_from_behind);
     return test_summary();
 }

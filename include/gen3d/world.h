@@ -7,8 +7,10 @@
  *   1. For each pose of the trajectory: render the cloud (z-buffer), inpaint the holes,
  *      estimate the view's depth, align it to the cloud along the camera rays (align.h),
  *      lift only the new pixels.
- *      Side steps (side_from) do the same at a lower resolution and, with side_carve, do not
- *      lift the hole pixels that a path view saw through (a point in front of its depth).
+ *      Side steps (side_from) do the same at a lower resolution, complete and align a hole that
+ *      a depth edge runs into from the edge's far side (g3d_align_far_side with align.edge_ratio:
+ *      what a step uncovers lies behind the occluder) and, with side_carve, do not lift the
+ *      hole pixels that a path view saw through (a point in front of its depth).
  *   2. M extra views on small orbits around the poses are rendered from the final cloud with
  *      their validity masks; they are not inpainted (training uses their valid pixels only).
  *
@@ -41,11 +43,11 @@ typedef struct g3d_world_params {
                                     left: 0 (or n_poses and more) = none (0) */
     int side_max_side;           /* side steps run at the input's size, downscaled so that the longer
                                     side is at most this: they only fill what the path left, and
-                                    their inpainting is most of their cost; >= 16 (384) */
+                                    their inpainting is most of their cost; >= 16 (512) */
     double side_carve;           /* > 0: a side step does not lift a hole pixel whose point a path
                                     view sees in front of its own depth by more than this fraction
-                                    of that depth (that view saw through it): better held-out
-                                    views, more empty pixels close up; 0..1, 0 = off (0) */
+                                    of that depth (that view saw through it: an inpainted guess
+                                    that would hide what the path saw); 0..1, 0 = off (0.02) */
     g3d_cloud_render_params render;
     g3d_align_params align;
     g3d_progress progress;       /* stage "world": step per pose; stopping returns G3D_CANCELLED */
