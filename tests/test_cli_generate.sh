@@ -58,6 +58,7 @@ rc=$?
 expect 2 "zero iterations" "$GEN3D" $G --iters 0 -o "$T/never"
 expect 2 "bad SH degree" "$GEN3D" $G --sh-degree 5 -o "$T/never"
 expect 2 "negative input beat" "$GEN3D" $G --input-every -1 -o "$T/never"
+expect 2 "negative coverage weight" "$GEN3D" $G --coverage-weight -0.5 -o "$T/never"
 expect 2 "negative exploration distance" "$GEN3D" $G --explore-distance -1 -o "$T/never"
 expect 2 "exploration angle of 90 degrees" "$GEN3D" $G --explore-angle 90 -o "$T/never"
 expect 1 "exploration distance beyond the scene" "$GEN3D" $G --explore-distance 50 -o "$T/never"

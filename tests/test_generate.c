@@ -227,6 +227,10 @@ TEST(refusals_before_work)
     small_params(&p, &f, out);
     p.sh_degree = 4;
     CHECK(g3d_generate(&p, NULL) == G3D_ERR_ARG);
+    small_params(&p, &f, out);
+    p.coverage_weight = NAN;
+    CHECK(g3d_generate(&p, NULL) == G3D_ERR_ARG);
+    CHECK(strstr(g3d_error_message(), "coverage weight") != NULL);
     small_params(&p, NULL, out);
     p.input.rgb_path = test_tmp("no-such-image.png");
     p.input.depth_path = test_tmp("no-such-depth.png");

@@ -157,8 +157,11 @@ typedef struct g3d_generate_params {
                                          iterations besides its turn among the views (4: the only
                                          view of real pixels, against dozens of re-rendered and
                                          inpainted ones on a long path); 0: its turn only */
+    double coverage_weight;           /* the training's coverage term (train.h coverage_weight;
+                                         0.2): every generated view is whole, so no pixel of it
+                                         should end up transparent */
     g3d_train_params train;           /* g3d_train_params_default(&p.train, 500); its seed is
-                                         replaced by `seed` */
+                                         replaced by `seed`, its coverage_weight by the above */
     /* ---- outputs ---- */
     const char *output_dir;           /* NULL: no files (the result still holds the scene) */
     g3d_stage last_stage;             /* G3D_STAGE_OUTPUTS: the whole run into output_dir;

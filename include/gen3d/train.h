@@ -2,8 +2,9 @@
  *
  * One iteration: pick the next view (a seeded random permutation, refilled every epoch),
  * render it (raster.h) with SH degree min(it / sh_degree_interval, model degree), masked
- * L1+SSIM loss (loss.h), backward, densification statistics, one Adam step (adam.h), and on
- * the densification schedule clone/split/prune and opacity resets (densify.h).
+ * L1+SSIM loss (loss.h) plus the optional coverage term, backward, densification statistics,
+ * one Adam step (adam.h), and on the densification schedule clone/split/prune and opacity
+ * resets (densify.h).
  * Deterministic for a fixed seed and thread count.
  */
 #ifndef G3D_TRAIN_H
@@ -37,6 +38,10 @@ typedef struct g3d_train_params {
     int64_t first_view_every;   /* > 0: every this many iterations train on views[0] (in
                                    g3d_generate the input, the only view that is all real
                                    pixels), besides its turn in the permutation; 0 = off */
+    double coverage_weight;     /* > 0: the loss adds this weight x the mean of (1 - accumulated
+                                   opacity) over each view's trained pixels: against the black
+                                   background a dark surface can otherwise turn transparent, and
+                                   the gaps open when seen from elsewhere; 0 = off (0) */
     int64_t coarse_until;       /* iterations 1..coarse_until see every view downscaled by
                                    coarse_factor (area filter; coarse to fine); 0 = off */
     int coarse_factor;          /* 2 */

@@ -50,6 +50,7 @@ void g3d_generate_params_default(g3d_generate_params *p)
     p->sh_degree = 3;
     g3d_footprint_init_default(&p->footprint);
     p->input_every = 4;
+    p->coverage_weight = 0.2;
     g3d_train_params_default(&p->train, 500);
     p->last_stage = G3D_STAGE_OUTPUTS;
     p->video = 1;
@@ -141,6 +142,8 @@ static g3d_status check_params(const g3d_generate_params *p)
         return G3D_ERR(G3D_ERR_ARG, "generate: stopping after the %s writes its folder: give an output folder",
                        g3d_stage_name(p->last_stage));
     if (p->input_every < 0) return G3D_ERR(G3D_ERR_ARG, "generate: input view every %d iterations (need >= 0)", p->input_every);
+    if (!(p->coverage_weight >= 0 && p->coverage_weight <= 100))
+        return G3D_ERR(G3D_ERR_ARG, "generate: coverage weight %g (need 0..100)", p->coverage_weight);
     if (p->sh_degree < 0 || p->sh_degree > G3D_SH_MAX_DEGREE)
         return G3D_ERR(G3D_ERR_ARG, "generate: SH degree %d is not in 0..%d", p->sh_degree, G3D_SH_MAX_DEGREE);
     if (p->steps < 0 || p->steps > 10000) return G3D_ERR(G3D_ERR_ARG, "generate: %d steps (need 0..10000)", p->steps);
@@ -562,6 +565,7 @@ static g3d_status stage_splats(run *r)
         g3d_train_params tp = p->train;
         tp.seed = p->seed;
         if (w->n_views > 0) tp.first_view_every = p->input_every;
+        tp.coverage_weight = p->coverage_weight;
         tp.progress = r->progress;
         rc = g3d_train(&r->scene, views, nviews, &tp, &r->train);
     }
@@ -771,6 +775,7 @@ static cJSON *config_json(const run *r)
     cJSON_AddNumberToObject(c, "sh_degree", p->sh_degree);
     cJSON_AddStringToObject(c, "init", p->knn_init ? "knn" : "footprint");
     cJSON_AddNumberToObject(c, "input_every", p->input_every);
+    cJSON_AddNumberToObject(c, "coverage_weight", p->coverage_weight);
     cJSON_AddStringToObject(c, "video_trajectory", p->video_trajectory);
     cJSON_AddNumberToObject(c, "video_frames", p->video_frames);
     cJSON_AddNumberToObject(c, "fps", p->video_params.fps);

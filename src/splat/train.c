@@ -87,6 +87,22 @@ static g3d_status coarse_views(const g3d_train_view *views, int n, int f, g3d_tr
     return rc;
 }
 
+/* The coverage term: weight x the mean of (1 - alpha) over the view's trained pixels (mask > 0.5,
+ * as the photometric loss); its gradient with respect to alpha goes into dalpha. */
+static double coverage_term(const g3d_train_view *v, const float *alpha, double weight, float *dalpha)
+{
+    size_t n = (size_t)v->cam.K.width * v->cam.K.height, valid = 0;
+    double open = 0;
+    for (size_t k = 0; k < n; k++)
+        if (!v->mask || v->mask->data[k] > 0.5f) {
+            valid++;
+            open += 1.0 - alpha[k];
+        }
+    float d = valid ? (float)(-weight / (double)valid) : 0.0f;
+    for (size_t k = 0; k < n; k++) dalpha[k] = !v->mask || v->mask->data[k] > 0.5f ? d : 0.0f;
+    return valid ? weight * open / (double)valid : 0.0;
+}
+
 /* Everything the loop carries from one iteration to the next: saving it and loading it back
  * continues a run exactly as if it had not stopped. */
 typedef struct train_state {
@@ -301,7 +317,7 @@ g3d_status g3d_train(g3d_gaussians *g, const g3d_train_view *views, int nviews,
     g3d_image *coarse_img = NULL;
     g3d_raster_ws *ws = NULL;
     g3d_gaussians grads = {0};
-    float *rgb = NULL, *drgb = NULL, *grad2d = NULL;
+    float *rgb = NULL, *drgb = NULL, *grad2d = NULL, *alpha = NULL, *dalpha = NULL;
     int32_t *radii = NULL;
     g3d_status rc;
     if (p->resume_path) {
@@ -328,6 +344,11 @@ g3d_status g3d_train(g3d_gaussians *g, const g3d_train_view *views, int nviews,
         rgb = g3d_calloc(npx, 3 * sizeof(float), "render buffer");
         drgb = g3d_calloc(npx, 3 * sizeof(float), "render gradient");
         if (!rgb || !drgb) rc = G3D_ERR_NOMEM;
+    }
+    if (rc == G3D_OK && p->coverage_weight > 0) {
+        alpha = g3d_calloc(npx, sizeof(float), "opacity buffer");
+        dalpha = g3d_calloc(npx, sizeof(float), "opacity gradient");
+        if (!alpha || !dalpha) rc = G3D_ERR_NOMEM;
     }
     g3d_raster_params rs;
     g3d_raster_params_default(&rs);
@@ -362,15 +383,16 @@ g3d_status g3d_train(g3d_gaussians *g, const g3d_train_view *views, int nviews,
         rs.sh_degree_active = (int)((it - 1) / (p->sh_degree_interval > 0 ? p->sh_degree_interval : 1));
         if (rs.sh_degree_active > g->sh_degree) rs.sh_degree_active = g->sh_degree;
 
-        if ((rc = g3d_raster_fwd(ws, g, &v->cam, &rs, rgb, NULL, NULL, radii)) != G3D_OK) break;
+        if ((rc = g3d_raster_fwd(ws, g, &v->cam, &rs, rgb, alpha, NULL, radii)) != G3D_OK) break;
         g3d_image pred = {v->cam.K.width, v->cam.K.height, 3, rgb};
         g3d_image dimg = {v->cam.K.width, v->cam.K.height, 3, drgb};
         double loss, psnr;
         if ((rc = g3d_loss_fwd_bwd(&pred, v->image, v->mask, p->lambda_ssim, &loss, NULL, &dimg)) != G3D_OK) break;
         if ((rc = g3d_psnr(&pred, v->image, v->mask, &psnr)) != G3D_OK) break;
+        if (alpha) loss += coverage_term(v, alpha, p->coverage_weight, dalpha);
         zero_grads(&grads, g->n);
         memset(grad2d, 0, (size_t)g->n * sizeof(float));
-        if ((rc = g3d_raster_bwd(ws, g, drgb, NULL, NULL, &grads, grad2d)) != G3D_OK) break;
+        if ((rc = g3d_raster_bwd(ws, g, drgb, dalpha, NULL, &grads, grad2d)) != G3D_OK) break;
         const int dens_on = p->densify && it < p->dens.until;
         if (dens_on) g3d_densify_accumulate(&s.st, grad2d, radii, g->n);
         if ((rc = g3d_adam_step_visible(&s.adam, g, &grads, extent, p->visible_adam ? radii : NULL)) != G3D_OK) break;
@@ -410,7 +432,7 @@ g3d_status g3d_train(g3d_gaussians *g, const g3d_train_view *views, int nviews,
     g3d_adam_free(&s.adam);
     g3d_densify_stats_free(&s.st);
     g3d_gaussians_free(&grads);
-    free(rgb); free(drgb); free(grad2d); free(radii); free(s.order);
+    free(rgb); free(drgb); free(grad2d); free(radii); free(s.order); free(alpha); free(dalpha);
     for (int i = 0; coarse_img && i < 2 * nviews; i++) g3d_image_free(&coarse_img[i]);
     free(coarse_img);
     free(coarse);

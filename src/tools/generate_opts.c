@@ -31,6 +31,7 @@ int g3d_cli_generate_opts(g3d_cli_generate *g, g3d_opt *out)
         {0, "sh-degree", G3D_OPT_INT, &p->sh_degree, "D", "spherical-harmonics degree of the Gaussians (0..3)"},
         {0, "knn-init", G3D_OPT_FLAG, &p->knn_init, NULL, "start the Gaussians isotropic (3-NN scale, opacity 0.1), not as pixel footprints"},
         {0, "input-every", G3D_OPT_INT, &p->input_every, "N", "train on the input view every N iterations besides its turn (0: its turn only)"},
+        {0, "coverage-weight", G3D_OPT_DOUBLE, &p->coverage_weight, "W", "weight of the training's pull towards opaque pixels (0: none; fewer empty pixels off the path)"},
         {0, "video-trajectory", G3D_OPT_STRING, &p->video_trajectory, "NAME", "video camera path: swing (a loop around the input view) or a preset below"},
         {0, "frames", G3D_OPT_INT, &p->video_frames, "N", "video frames"},
         {0, "fps", G3D_OPT_INT, &p->video_params.fps, "N", "video frame rate"},
@@ -51,6 +52,7 @@ int g3d_cli_generate_check(const g3d_cli_generate *g)
     if ((rc = g3d_cli_diffusion_check(&g->df, g->in.rgb != NULL, g->in.depth_model != NULL)) != 0) return rc;
     if (g->iters < 1 || g->iters > 1000000) return g3d_cli_errorf(G3D_EXIT_USAGE, "--iters must be in 1..1000000");
     if (p->input_every < 0 || p->input_every > 1000000) return g3d_cli_errorf(G3D_EXIT_USAGE, "--input-every must be in 0..1000000");
+    if (!(p->coverage_weight >= 0 && p->coverage_weight <= 100)) return g3d_cli_errorf(G3D_EXIT_USAGE, "--coverage-weight must be in 0..100");
     if (p->sh_degree < 0 || p->sh_degree > 3) return g3d_cli_errorf(G3D_EXIT_USAGE, "--sh-degree must be in 0..3");
     if (p->video_frames < 2 || p->video_frames > 100000) return g3d_cli_errorf(G3D_EXIT_USAGE, "--frames must be in 2..100000");
     if (p->video_params.fps < 1 || p->video_params.fps > 240) return g3d_cli_errorf(G3D_EXIT_USAGE, "--fps must be in 1..240");
