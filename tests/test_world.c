@@ -279,6 +279,40 @@ TEST(side_steps_fill_only_what_the_path_left)
     g3d_frame_free(&f);
 }
 
+/* A side step that looks away from the scene is left out (the views after it close the gap);
+ * the same pose on the path is an error (bad_trajectories). */
+TEST(side_steps_that_see_nothing_are_left_out)
+{
+    g3d_frame f;
+    g3d_inpainter ip;
+    g3d_depth_estimator de;
+    double d = side_step_setup(&f, &ip, &de);
+    g3d_mat4 poses[4] = {g3d_mat4_identity(), g3d_pose_yaw_pitch(15, 0, g3d_v3(0, 0, 0)),
+                         g3d_pose_yaw_pitch(180, 0, g3d_v3(0, 0, -0.5)), g3d_pose_yaw_pitch(-15, 0, g3d_v3(d, 0, 0))};
+    g3d_world_params wp;
+    g3d_world_params_default(&wp);
+    wp.extra_views = 0;
+    wp.side_from = 2;
+    wp.side_max_side = 48;
+    g3d_world w;
+    CHECK_OK(g3d_world_generate(&f, poses, 4, &ip, &de, NULL, &wp, 3, &w));
+    CHECK(w.n_views == 3);
+    if (w.n_views == 3) {
+        g3d_mat4 want = g3d_mat4_mul(f.cam.c2w, poses[3]);
+        CHECK(g3d_mat4_max_abs_diff(w.cams[2].c2w, want) < 1e-12);
+        CHECK(w.rgb[2].w == 48 && w.steps[2].hole_fraction < 1.0);
+        int64_t from_last = 0;
+        for (int64_t k = 0; k < w.cloud.n; k++) from_last += w.cloud.view[k] == 2;
+        CHECK(from_last > 0);
+    }
+    g3d_world_free(&w);
+    wp.side_from = 3;
+    CHECK_FAILS(g3d_world_generate(&f, poses, 4, &ip, &de, NULL, &wp, 3, &w));
+    CHECK(strstr(g3d_error_message(), "pose 2") != NULL);
+    g3d_inpainter_free(&ip);
+    g3d_frame_free(&f);
+}
+
 /* Side steps sideways past the box: what they uncover beside it is completed from the far side
  * of its edges, so without carving far fewer of their points float in front of what the path
  * saw than when the holes are completed from both sides. */
@@ -318,6 +352,7 @@ int main(void)
     RUN(world_folder_round_trip);
     RUN(bad_trajectories);
     RUN(side_steps_fill_only_what_the_path_left);
+    RUN(side_steps_that_see_nothing_are_left_out);
     RUN(disocclusions_are_completed_from_behind);
     return test_summary();
 }

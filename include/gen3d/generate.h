@@ -145,7 +145,10 @@ typedef struct g3d_generate_params {
                                          exploration set's cameras (`explore` below) as the
                                          world's side steps (world.side_max_side, side_carve),
                                          so that what they see behind depth edges is filled
-                                         (default 0: they cost held-out fidelity, docs/explore.md) */
+                                         (docs/explore.md); 0: none; -1 (default): on with the
+                                         built-in classical and LaMa inpainters, off with
+                                         inpaint_model or a caller's `inpainter` (26 more
+                                         diffusion views would take hours on a CPU) */
     /* ---- splats ---- */
     int sh_degree;                    /* 0..3 (3) */
     int knn_init;                     /* 1: Gaussians start as the Inria recipe (isotropic, 3-NN
@@ -154,9 +157,10 @@ typedef struct g3d_generate_params {
                                          the cloud keeps them (not a world read from a folder) */
     g3d_footprint_init footprint;     /* g3d_footprint_init_default */
     int input_every;                  /* > 0: the input view is trained every this many
-                                         iterations besides its turn among the views (4: the only
+                                         iterations besides its turn among the views (2: the only
                                          view of real pixels, against dozens of re-rendered and
-                                         inpainted ones on a long path); 0: its turn only */
+                                         inpainted ones, the exploration's side steps among
+                                         them); 0: its turn only */
     double coverage_weight;           /* the training's coverage term (train.h coverage_weight;
                                          0.2): every generated view is whole, so no pixel of it
                                          should end up transparent */

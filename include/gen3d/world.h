@@ -43,7 +43,7 @@ typedef struct g3d_world_params {
                                     left: 0 (or n_poses and more) = none (0) */
     int side_max_side;           /* side steps run at the input's size, downscaled so that the longer
                                     side is at most this: they only fill what the path left, and
-                                    their inpainting is most of their cost; >= 16 (512) */
+                                    their inpainting is most of their cost; >= 16 (384) */
     double side_carve;           /* > 0: a side step does not lift a hole pixel whose point a path
                                     view sees in front of its own depth by more than this fraction
                                     of that depth (that view saw through it: an inpainted guess

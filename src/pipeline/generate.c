@@ -49,7 +49,7 @@ void g3d_generate_params_default(g3d_generate_params *p)
     g3d_world_params_default(&p->world);
     p->sh_degree = 3;
     g3d_footprint_init_default(&p->footprint);
-    p->input_every = 4;
+    p->input_every = 2;
     p->coverage_weight = 0.2;
     g3d_train_params_default(&p->train, 500);
     p->last_stage = G3D_STAGE_OUTPUTS;
@@ -58,7 +58,7 @@ void g3d_generate_params_default(g3d_generate_params *p)
     p->video_frames = 120;
     g3d_video_params_default(&p->video_params);
     g3d_explore_params_default(&p->explore);
-    p->explore_views = 0;
+    p->explore_views = -1;
     p->sd_parts.prediction = -1;
     g3d_sd_view_params_default(&p->diffusion);
     p->seed = 42;
@@ -123,10 +123,17 @@ static g3d_status check_cancel(const run *r)
     return g3d_cancel_requested(&r->p->cancel) ? G3D_ERR(G3D_CANCELLED, "cancelled") : G3D_OK;
 }
 
+/* The world takes generation steps at the exploration set's cameras (explore_views): by
+ * default with the built-in classical and LaMa inpainters, not with diffusion or a caller's. */
+static int explore_steps(const g3d_generate_params *p)
+{
+    return p->explore_views > 0 || (p->explore_views < 0 && !p->inpaint_model && !p->inpainter);
+}
+
 /* The run builds the exploration set: to measure the scene, or for generation steps. */
 static int uses_explore(const g3d_generate_params *p)
 {
-    return p->last_stage == G3D_STAGE_OUTPUTS || (p->explore_views && !p->world_dir && p->last_stage == G3D_STAGE_WORLD);
+    return p->last_stage == G3D_STAGE_OUTPUTS || (explore_steps(p) && !p->world_dir && p->last_stage == G3D_STAGE_WORLD);
 }
 
 /* Everything that can be refused without work is refused before any: a mistyped path name
@@ -478,7 +485,7 @@ static g3d_status make_poses(const g3d_generate_params *p, const g3d_frame *f, g
         }
     }
     *n_path = *n;
-    if (rc == G3D_OK && p->explore_views) rc = append_explore_poses(p, f, poses, n);
+    if (rc == G3D_OK && explore_steps(p)) rc = append_explore_poses(p, f, poses, n);
     if (rc != G3D_OK) {
         free(*poses);
         *poses = NULL;
@@ -768,7 +775,7 @@ static cJSON *config_json(const run *r)
             if (view) cJSON_AddStringToObject(c, "view_prompt", view);
         }
     }
-    if (!p->world_dir) cJSON_AddBoolToObject(c, "explore_views", p->explore_views);
+    if (!p->world_dir) cJSON_AddBoolToObject(c, "explore_views", explore_steps(p));
     cJSON_AddNumberToObject(c, "explore_distance", p->explore.distance);
     cJSON_AddNumberToObject(c, "explore_angle", p->explore.angle_deg);
     cJSON_AddNumberToObject(c, "iterations", (double)p->train.iterations);

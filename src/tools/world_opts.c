@@ -33,6 +33,8 @@ int g3d_cli_world_check(const g3d_cli_world *w)
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--distance must be >= 0 and --angle within a full turn");
     if (!(w->explore_distance >= 0 && w->explore_distance <= 1e4))
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--explore-distance must be in 0..10000 metres");
+    if (w->explore_views > 0 && w->no_explore_views)
+        return g3d_cli_errorf(G3D_EXIT_USAGE, "--explore-views and --no-explore-views contradict each other");
     if (!(w->explore_angle >= 0 && w->explore_angle < 90))
         return g3d_cli_errorf(G3D_EXIT_USAGE, "--explore-angle must be at least 0 and below 90 degrees");
     return 0;
@@ -59,7 +61,7 @@ void g3d_cli_world_apply(const g3d_cli_world *w, g3d_generate_params *p)
     p->layers = !w->no_layers;
     p->lama_model = w->lama_model;
     p->seg_model = w->seg_model;
-    p->explore_views = w->explore_views;
+    p->explore_views = w->no_explore_views ? 0 : w->explore_views;
     p->explore.distance = w->explore_distance;
     p->explore.angle_deg = w->explore_angle;
 }

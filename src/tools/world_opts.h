@@ -9,7 +9,7 @@
 typedef struct g3d_cli_world {
     const char *trajectory;
     const char *inpainter, *lama_model, *seg_model;
-    int steps, extra, max_side, no_layers, explore_views;
+    int steps, extra, max_side, no_layers, explore_views, no_explore_views;
     double angle, distance, explore_distance, explore_angle;
 } g3d_cli_world;
 
@@ -24,7 +24,8 @@ typedef struct g3d_cli_world {
     {0, "inpainter", G3D_OPT_STRING, &(w)->inpainter, "NAME", "classic (PatchMatch) or lama (needs --lama-model)"},  \
     {0, "lama-model", G3D_OPT_PATH, &(w)->lama_model, "CKPT", "LaMa checkpoint (big-lama/models/best.ckpt)"},       \
     {0, "seg-model", G3D_OPT_PATH, &(w)->seg_model, "CKPT", "Segment Anything checkpoint: the layers' masks (sam_vit_*.pth)"}, \
-    {0, "explore-views", G3D_OPT_FLAG, &(w)->explore_views, NULL, "side steps at the exploration cameras, at most 512 px (fewer holes off the path)"}, \
+    {0, "explore-views", G3D_OPT_FLAG, &(w)->explore_views, NULL, "side steps at the exploration cameras, at most 384 px (the default, except with --inpaint-model)"}, \
+    {0, "no-explore-views", G3D_OPT_FLAG, &(w)->no_explore_views, NULL, "no side steps at the exploration cameras (faster, holes behind depth edges)"}, \
     {0, "explore-distance", G3D_OPT_DOUBLE, &(w)->explore_distance, "M", "exploration set: step d in metres (0: a quarter of the median depth)"}, \
     {0, "explore-angle", G3D_OPT_DOUBLE, &(w)->explore_angle, "DEG", "exploration set: yaw and pitch reach in degrees, below 90"}
 

@@ -20,7 +20,7 @@ void g3d_world_params_default(g3d_world_params *p)
     p->extra_views = 10;
     p->extra_angle_deg = 5.0;
     p->hole_stride = 2;
-    p->side_max_side = 512;
+    p->side_max_side = 384;
     p->side_carve = 0.02;
     g3d_cloud_render_params_default(&p->render);
     g3d_align_params_default(&p->align);
@@ -161,9 +161,15 @@ static g3d_intrinsics side_intrinsics(g3d_intrinsics K, int max_side)
     return g3d_intrinsics_resize(K, w, h);
 }
 
-/* One generation step at pose i. */
+/* A side step that sees less of the cloud than this fraction of its pixels is left out: it
+ * looks past the scene (a narrow input turned by the exploration set's yaw), and what it would
+ * add has next to nothing to align its depth to. */
+#define SIDE_MIN_COVERED 0.05
+
+/* One generation step at pose i. A side step that sees too little of the cloud sets *skipped
+ * and adds nothing. */
 static g3d_status world_step(g3d_world *w, int i, const g3d_inpainter *inpaint, const g3d_depth_estimator *depth,
-                             const g3d_world_params *p, uint64_t seed)
+                             const g3d_world_params *p, uint64_t seed, int *skipped)
 {
     g3d_world_step *st = &w->steps[i];
     const g3d_camera *cam = &w->cams[i];
@@ -176,6 +182,9 @@ static g3d_status world_step(g3d_world *w, int i, const g3d_inpainter *inpaint, 
     if ((rc = g3d_image_create(&holes, mask.w, mask.h, 1)) != G3D_OK) goto done;
     for (size_t k = 0; k < n; k++) { holes.data[k] = mask.data[k] < 0.5f; nh += mask.data[k] < 0.5f; }
     st->hole_fraction = (double)nh / n;
+    const int side = p->side_from > 0 && i >= p->side_from;
+    *skipped = side && (double)(n - nh) < SIDE_MIN_COVERED * (double)n;
+    if (*skipped) goto done;
     if (nh == n) {
         rc = G3D_ERR(G3D_ERR_ARG, "trajectory pose %d sees none of the scene (it leaves the scene entirely); use a shorter path", i);
         goto done;
@@ -189,7 +198,7 @@ static g3d_status world_step(g3d_world *w, int i, const g3d_inpainter *inpaint, 
     /* Only the side steps complete from the far side: the path's turns uncover little behind
      * edges, and on the default input doing so there too cost 0.04 dB at the right view. */
     g3d_align_params ap = p->align;
-    if (!(p->side_from > 0 && i >= p->side_from)) ap.edge_ratio = 0;
+    if (!side) ap.edge_ratio = 0;
     rc = nh ? far_side_known(&cloud_d, &mask, ap.edge_ratio, &known) : g3d_image_clone(&known, &cloud_d);
     if (rc == G3D_OK) rc = depth->estimate(depth->ctx, &rgb, &known, nh ? &holes : NULL, &est, &K);
     st->seconds_depth = g3d_time_now() - t;
@@ -201,7 +210,7 @@ static g3d_status world_step(g3d_world *w, int i, const g3d_inpainter *inpaint, 
     /* The view keeps the cloud's depth where the cloud covered it: only the holes are new. */
     for (size_t k = 0; k < n; k++) if (mask.data[k] >= 0.5f) est.data[k] = cloud_d.data[k];
     t = g3d_time_now();
-    if (nh && p->side_carve > 0 && p->side_from > 0 && i >= p->side_from) carve_seen(w, p->side_from, cam, &est, p->side_carve, &holes);
+    if (nh && p->side_carve > 0 && side) carve_seen(w, p->side_from, cam, &est, p->side_carve, &holes);
     if (nh) rc = g3d_cloud_lift_sparse(&w->cloud, &rgb, &est, cam, &holes, i, p->hole_stride, &st->points_added);
     st->seconds_lift = g3d_time_now() - t;
     if (rc != G3D_OK) goto done;
@@ -251,13 +260,23 @@ g3d_status g3d_world_generate(const g3d_frame *input, const g3d_mat4 *poses, int
     if (rc == G3D_OK) rc = lift_input(out, input, depth, layers, p);
     if (rc == G3D_OK && g3d_progress_report(&p->progress, "world", 1, n_poses, NULL))
         rc = G3D_ERR(G3D_CANCELLED, "world generation cancelled");
+    /* v: the view the step at pose i becomes (side steps left out close the gap) */
+    int v = 1;
     for (int i = 1; i < n_poses && rc == G3D_OK; i++) {
-        rc = world_step(out, i, inpaint, depth, p, seed);
+        int skipped = 0;
+        out->cams[v] = out->cams[i];
+        memset(&out->steps[v], 0, sizeof out->steps[v]);
+        rc = world_step(out, v, inpaint, depth, p, seed, &skipped);
         char info[96];
-        snprintf(info, sizeof info, "holes %.1f %%, %lld points", 100.0 * out->steps[i].hole_fraction, (long long)out->cloud.n);
+        if (skipped)
+            snprintf(info, sizeof info, "side step left out: it sees %.1f %% of the scene", 100.0 * (1.0 - out->steps[v].hole_fraction));
+        else
+            snprintf(info, sizeof info, "holes %.1f %%, %lld points", 100.0 * out->steps[v].hole_fraction, (long long)out->cloud.n);
+        if (rc == G3D_OK && !skipped) v++;
         if (rc == G3D_OK && g3d_progress_report(&p->progress, "world", i + 1, n_poses, info))
             rc = G3D_ERR(G3D_CANCELLED, "world generation cancelled");
     }
+    if (rc == G3D_OK) out->n_views = v;
     /* Extra views: orbits around the path's poses, rendered from the final cloud, not inpainted. */
     if (rc == G3D_OK && p->extra_views > 0) {
         int per = (p->extra_views + n_path - 1) / n_path;
