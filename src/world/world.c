@@ -58,13 +58,12 @@ double g3d_depth_median(const g3d_image *depth)
 
 /* The depth a view's estimator completes its holes from: the cloud's depth (depth, covered
  * where mask >= 0.5), with the near side of every depth edge that runs into a hole moved to the
- * far side (g3d_align_far_side), so that a disocclusion is completed from what lies behind its
- * occluder, not interpolated between the two. Plain copy with edge_ratio 0 (off). */
+ * far side (g3d_align_far_side, edge_ratio > 1), so that a disocclusion is completed from what
+ * lies behind its occluder, not interpolated between the two. */
 static g3d_status far_side_known(const g3d_image *depth, const g3d_image *mask, float edge_ratio, g3d_image *out)
 {
     g3d_image far = {0};
     G3D_TRY(g3d_image_clone(out, depth));
-    if (!(edge_ratio > 0)) return G3D_OK;
     g3d_status rc = g3d_align_far_side(depth, mask, edge_ratio, &far, NULL);
     for (size_t k = 0; rc == G3D_OK && k < g3d_image_size(out); k++)
         if (far.data[k] > 0) out->data[k] = far.data[k];
@@ -199,8 +198,9 @@ static g3d_status world_step(g3d_world *w, int i, const g3d_inpainter *inpaint, 
      * edges, and on the default input doing so there too cost 0.04 dB at the right view. */
     g3d_align_params ap = p->align;
     if (!side) ap.edge_ratio = 0;
-    rc = nh ? far_side_known(&cloud_d, &mask, ap.edge_ratio, &known) : g3d_image_clone(&known, &cloud_d);
-    if (rc == G3D_OK) rc = depth->estimate(depth->ctx, &rgb, &known, nh ? &holes : NULL, &est, &K);
+    const int from_far = nh && ap.edge_ratio > 0;
+    if (from_far) rc = far_side_known(&cloud_d, &mask, ap.edge_ratio, &known);
+    if (rc == G3D_OK) rc = depth->estimate(depth->ctx, &rgb, from_far ? &known : &cloud_d, nh ? &holes : NULL, &est, &K);
     st->seconds_depth = g3d_time_now() - t;
     if (rc != G3D_OK) goto done;
     t = g3d_time_now();
