@@ -134,7 +134,8 @@ CLONES void nn_exp_rows(float *s, long lds, int rows, const float *m, float *sum
     }
 }
 
-CLONES static void online_softmax(float *s, long lds, int rows, int n, float *m, float *l, float *corr)
+CLONES static void online_softmax(float *s, long lds, int rows, int n, const float *bmax, float *m, float *l,
+                                  float *corr)
 {
     for (int i0 = 0; i0 < n; i0 += 64) {
         /* column maxima: up to 4 vectors side by side and two rows at a time, so the max
@@ -142,7 +143,9 @@ CLONES static void online_softmax(float *s, long lds, int rows, int n, float *m,
         const int nv = (n - i0) / 16 < 4 ? (n - i0) / 16 : 4;
         vf mx[4], mx2[4];
         for (int v = 0; v < nv; v++) mx[v] = mx2[v] = *(const vfu *)(m + i0 + 16 * v);
-        int r = 0;
+        if (bmax)
+            for (int v = 0; v < nv; v++) mx2[v] = vmax(mx2[v], *(const vfu *)(bmax + i0 + 16 * v));
+        int r = bmax ? rows : 0;
         for (; r + 2 <= rows; r += 2)
             for (int v = 0; v < nv; v++) {
                 mx[v] = vmax(mx[v], *(const vfu *)(s + r * lds + i0 + 16 * v));
@@ -184,15 +187,17 @@ __attribute__((target("avx512f"))) static inline __m512 exp2_512(__m512 t)
     return _mm512_scalef_ps(p, n);
 }
 
-__attribute__((target("avx512f"))) static void online_softmax512(float *s, long lds, int rows, int n, float *m,
-                                                                float *l, float *corr)
+__attribute__((target("avx512f"))) static void online_softmax512(float *s, long lds, int rows, int n,
+                                                                const float *bmax, float *m, float *l, float *corr)
 {
     const __m512 log2e = _mm512_set1_ps(1.44269504088896341f);
     for (int i0 = 0; i0 < n; i0 += 64) {
         const int nv = (n - i0) / 16 < 4 ? (n - i0) / 16 : 4;
         __m512 mx[4], mx2[4];
         for (int v = 0; v < nv; v++) mx[v] = mx2[v] = _mm512_loadu_ps(m + i0 + 16 * v);
-        int r = 0;
+        if (bmax)
+            for (int v = 0; v < nv; v++) mx2[v] = _mm512_max_ps(mx2[v], _mm512_loadu_ps(bmax + i0 + 16 * v));
+        int r = bmax ? rows : 0;
         for (; r + 2 <= rows; r += 2)
             for (int v = 0; v < nv; v++) {
                 mx[v] = _mm512_max_ps(mx[v], _mm512_loadu_ps(s + r * lds + i0 + 16 * v));
@@ -223,12 +228,12 @@ __attribute__((target("avx512f"))) static void online_softmax512(float *s, long 
     }
 }
 
-void nn_online_softmax(float *s, long lds, int rows, int n, float *m, float *l, float *corr)
+void nn_online_softmax(float *s, long lds, int rows, int n, const float *bmax, float *m, float *l, float *corr)
 {
     if (nn_isa() == NN_ISA_AVX512)
-        online_softmax512(s, lds, rows, n, m, l, corr);
+        online_softmax512(s, lds, rows, n, bmax, m, l, corr);
     else
-        online_softmax(s, lds, rows, n, m, l, corr);
+        online_softmax(s, lds, rows, n, bmax, m, l, corr);
 }
 
 /* Transposes of attention's query and output tiles: 16 x 16 blocks through four stages of

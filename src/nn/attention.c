@@ -25,12 +25,17 @@ static int rup6(int x) { return (x + NN_MR - 1) / NN_MR * NN_MR; }
 
 typedef struct tiles {
     float *qt, *st, *ot, *edge, *m, *l, *t1;
+    float *bm; /* the column maxima of a key block's scores, taken by the kernel */
     float *vt; /* [rup6(hdv) x KB]: a key block's values transposed, for wide heads (or NULL) */
+    const float *rel[2][KB]; /* per row of the score tile: its rows of the relative-position tables */
 } tiles;
 
-/* The next block a thread computes: head h, queries q0 .. q0+n-1 of problem b (n = 0: none). */
+/* The next block a thread computes: head h, queries q0 .. q0+n-1 of problem b (n = 0: none);
+ * and rows kv0 .. kv1-1 of the keys and values of head kvh of problem b, to be fetched while
+ * this block computes (kv1 = 0: none). */
 typedef struct next_block {
     int b, h, q0, n;
+    int kvh, kv0, kv1;
 } next_block;
 
 /* Rows i0 .. i1-1 of the next block's queries and outputs, fetched into L2 while the current
@@ -50,6 +55,21 @@ static inline __attribute__((always_inline)) void prefetch_rows(const g3d_nn_att
     }
 }
 
+/* Rows j0 .. j1-1 of the keys and values of the next head, fetched into L2 a share with each
+ * block of the current head: their first reads had waited on memory (a SAM window's keys and
+ * values are 1.2 MB, rows 3 KB apart, one head's part of each row taken at a time). */
+static inline __attribute__((always_inline)) void prefetch_kv(const g3d_nn_attn *a, const next_block *nx, int j0, int j1)
+{
+    for (int j = j0; j < j1; j++) {
+        const float *kj = a->k + nx->b * a->bsk + (long)j * a->ldk + nx->kvh * a->hd;
+        const float *vj = a->v + nx->b * a->bsv + (long)j * a->ldv + nx->kvh * a->hdv;
+        for (int c = 0; c < a->hd; c += 16) __builtin_prefetch(kj + c, 0, 2);
+        __builtin_prefetch(kj + a->hd - 1, 0, 2);
+        for (int c = 0; c < a->hdv; c += 16) __builtin_prefetch(vj + c, 0, 2);
+        __builtin_prefetch(vj + a->hdv - 1, 0, 2);
+    }
+}
+
 /* Block i of the queries: blocks of QB, except that a last one of at most 16 queries and the
  * block before it split their queries into two of at least 17 (as many vector lanes, but no
  * products one vector wide: SAM's windows of 196 tokens had ended in a block of 4). */
@@ -64,7 +84,7 @@ static void query_block(int nq, int i, int *q0, int *n)
     *q0 = (nqb - 2) * QB + (i == nqb - 1 ? first : 0), *n = i == nqb - 1 ? QB + rem - first : first;
 }
 
-static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0, int nqv, const next_block *nx)
+static void task(const g3d_nn_attn *in, tiles *T, int b, int h, int q0, int nqv, const next_block *nx)
 {
     /* problem b of a batch: the same descriptor with its pointers moved */
     g3d_nn_attn pb = *in;
@@ -81,16 +101,42 @@ static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0, in
     int kend = a->nk;
     if (a->causal && q0 + nqv - 1 + shift + 1 < kend) kend = q0 + nqv + shift;
     const int nkb = (kend + KB - 1) / KB, kbs = nkb ? (kend + nkb - 1) / nkb : 0;
+    /* SAM's relative positions are added by the kernel while the scores are in registers, and
+     * without a mask or another bias the kernel takes the column maxima too: the bias pass and
+     * the softmax's pass for the maxima had each read and written the tile again (a 196-key tile
+     * does not fit in L1). */
+    const g3d_nn_bias_relpos *rp = a->bias == g3d_nn_bias_relpos_fn ? a->bias_ctx : NULL;
+    const int fuse = !a->causal && (!a->bias || rp);
+    const float *rh = NULL, *rw = NULL;
+    if (rp) {
+        const long hb = (long)b * rp->heads + h;
+        rh = rp->rh + hb * rp->kh * rp->nq + q0, rw = rp->rw + hb * rp->kw * rp->nq + q0;
+    }
     for (int k0 = 0; k0 < kend; k0 += kbs) {
         const int kb = kend - k0 < kbs ? kend - k0 : kbs;
+        float *bm = fuse && kb >= NN_MR ? T->bm : NULL; /* not with the zero keys of a short block */
+        if (bm)
+            for (int i = 0; i < QW; i++) bm[i] = -INFINITY;
+        const float *const *r0 = rp ? T->rel[0] : NULL, *const *r1 = T->rel[1];
+        if (rp)
+            for (int j = 0, ky = k0 / rp->kw, kx = k0 % rp->kw; j < (kb > NN_MR ? kb : NN_MR); j++) {
+                /* rows past a short block's keys are not used; any table row will do */
+                T->rel[0][j] = rh + (long)(j < kb ? ky : 0) * rp->nq, T->rel[1][j] = rw + (long)(j < kb ? kx : 0) * rp->nq;
+                if (++kx == rp->kw) kx = 0, ky++;
+            }
         /* S^T = K_blk (scale q)^T: the whole groups of six keys in one kernel call (in runs of
          * four with the prefetches of the next block between them, where there is one) */
         const int nfull = kb / NN_MR, run = nx->n ? 4 : nfull;
         for (int g0 = 0; g0 < nfull; g0 += run) {
             const int ng = nfull - g0 < run ? nfull - g0 : run;
-            nn_kernel_groups(hd, a->k + (long)(k0 + NN_MR * g0) * a->ldk + h * hd, a->ldk, 1, NN_MR * a->ldk, qt, QB,
-                             st + NN_MR * g0 * QB, QB, NN_MR * QB, nvq, ng, 0);
-            if (k0 == 0) prefetch_rows(in, nx, NN_MR * g0, g0 + ng == nfull ? QB : NN_MR * (g0 + ng));
+            nn_kernel_scores(hd, a->k + (long)(k0 + NN_MR * g0) * a->ldk + h * hd, a->ldk, 1, NN_MR * a->ldk, qt, QB,
+                             st + NN_MR * g0 * QB, QB, NN_MR * QB, nvq, ng, r0 ? r0 + NN_MR * g0 : NULL,
+                             r1 + NN_MR * g0, nqv, bm);
+            if (k0 == 0) {
+                prefetch_rows(in, nx, NN_MR * g0, g0 + ng == nfull ? QB : NN_MR * (g0 + ng));
+                const int kvn = nx->kv1 - nx->kv0;
+                prefetch_kv(in, nx, nx->kv0 + kvn * g0 / nfull, nx->kv0 + kvn * (g0 + ng) / nfull);
+            }
         }
         if (kb % NN_MR) {
             /* a last partial group of keys is redone as the six last keys (the values it writes
@@ -102,18 +148,18 @@ static void task(const g3d_nn_attn *in, const tiles *T, int b, int h, int q0, in
                 for (int i = 0; i < NN_MR; i++)
                     for (int d = 0; d < hd; d++) T->edge[i * hd + d] = i < kb ? ka[i * a->ldk + d] : 0.0f;
                 ka = T->edge, lda = hd;
-                if (k0 == 0) prefetch_rows(in, nx, 0, QB);
+                if (k0 == 0) prefetch_rows(in, nx, 0, QB), prefetch_kv(in, nx, nx->kv0, nx->kv1);
             }
-            nn_kernel(hd, ka, lda, 1, qt, QB, st + r * QB, QB, nvq, 0);
+            nn_kernel_scores(hd, ka, lda, 1, 0, qt, QB, st + r * QB, QB, 0, nvq, 1, r0 ? r0 + r : NULL, r1 + r, nqv, bm);
         }
-        if (a->bias) a->bias(a->bias_ctx, b, h, q0, nqv, k0, kb, st, 1, QB);
+        if (a->bias && !rp) a->bias(a->bias_ctx, b, h, q0, nqv, k0, kb, st, 1, QB);
         if (a->causal)
             for (int j = 0; j < kb; j++) {
                 int lim = k0 + j - q0 - shift; /* queries i < lim must not see key k0+j */
                 for (int i = 0; i < QW && i < lim; i++) st[j * QB + i] = -INFINITY;
             }
         /* online softmax: new running maximum, rescale what was accumulated */
-        nn_online_softmax(st, QB, kb, QW, m, l, corr);
+        nn_online_softmax(st, QB, kb, QW, bm, m, l, corr);
         /* the first block starts the sums (acc = 0 below) instead of scaling zeros */
         if (k0)
             for (int d = 0; d < hdv; d++)
@@ -186,15 +232,15 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
     {
         tiles T = {0};
         const size_t nvt = a.hdv * KB > VT_MIN ? (size_t)rup6(a.hdv) * KB : 0;
-        size_t nbuf = (size_t)(a.hd + KB + rup6(a.hdv) + 3) * QB + edge + nvt;
+        size_t nbuf = (size_t)(a.hd + KB + rup6(a.hdv) + 4) * QB + edge + nvt;
         float *buf = aligned_alloc(64, (sizeof(float) * nbuf + 63) / 64 * 64);
         if (!buf) {
 #pragma omp atomic write
             failed = 1;
         } else {
             T.qt = buf, T.st = T.qt + (size_t)a.hd * QB, T.ot = T.st + (size_t)KB * QB;
-            T.m = T.ot + (size_t)rup6(a.hdv) * QB, T.l = T.m + QB, T.t1 = T.l + QB;
-            T.edge = T.t1 + QB;
+            T.m = T.ot + (size_t)rup6(a.hdv) * QB, T.l = T.m + QB, T.t1 = T.l + QB, T.bm = T.t1 + QB;
+            T.edge = T.bm + QB;
             if (nvt) {
                 /* its rows past hdv feed only the tile's spare rows, but must be numbers */
                 T.vt = T.edge + edge;
@@ -215,7 +261,8 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
             for (int h = 0; h < a.heads; h++)
                 for (int i = i0; i < i1; i++) {
                     /* the next block of this head, else the first of the next head */
-                    next_block nx = {b, i + 1 < i1 ? h : h + 1, 0, 0};
+                    next_block nx = {b, i + 1 < i1 ? h : h + 1, 0, 0, h + 1, 0, 0};
+                    if (h + 1 < a.heads) nx.kv0 = (i - i0) * a.nk / (i1 - i0), nx.kv1 = (i + 1 - i0) * a.nk / (i1 - i0);
                     if (nx.h < a.heads) query_block(a.nq, i + 1 < i1 ? i + 1 : i0, &nx.q0, &nx.n);
                     query_block(a.nq, i, &q0, &n);
                     task(&a, &T, b, h, q0, n, &nx);
@@ -247,8 +294,8 @@ void g3d_nn_bias_dense_fn(void *ctx, int batch, int head, int q0, int nq, int k0
 }
 
 /* vectorised for the instruction sets of the kernels (it had been 6-10 % of SAM's attention) */
-__attribute__((target_clones("avx512f", "avx2", "default"))) void
-g3d_nn_bias_relpos_fn(void *ctx, int batch, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks)
+__attribute__((target_clones("avx512f", "avx2", "default"))) static void
+relpos_add(void *ctx, int batch, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks)
 {
     const g3d_nn_bias_relpos *r = ctx;
     /* tables are key-major, so the queries of one key are contiguous like the tile's columns */
@@ -264,6 +311,13 @@ g3d_nn_bias_relpos_fn(void *ctx, int batch, int head, int q0, int nq, int k0, in
             for (int i = 0; i < nq; i++) sj[i * qs] += h[i] + w[i];
         if (++kx == r->kw) kx = 0, ky++;
     }
+}
+
+/* A plain function, not the clones themselves: g3d_nn_attend recognises it by its address and
+ * adds the terms inside the kernel instead. */
+void g3d_nn_bias_relpos_fn(void *ctx, int batch, int head, int q0, int nq, int k0, int nk, float *s, long qs, long ks)
+{
+    relpos_add(ctx, batch, head, q0, nq, k0, nk, s, qs, ks);
 }
 
 g3d_status g3d_nn_relpos_tables(const float *q, long ldq, int heads, int hd, int qh, int qw, int kh, int kw,

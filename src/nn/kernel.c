@@ -57,7 +57,7 @@ typedef float v8u __attribute__((vector_size(32), aligned(4), may_alias));
         const v16 x = _mm512_set1_ps((P)[OFF]);                                                                \
         _Pragma("GCC unroll 4") for (int j = 0; j < NCH; j++) r[R][j] += x * bv[j];                            \
     } while (0)
-#define KERNEL512_BODY(NCH_)                                                                                   \
+#define KERNEL512_PRODUCT(NCH_)                                                                                \
     enum { NCH = NCH_ };                                                                                       \
     v16 r[NN_MR][NCH];                                                                                         \
     _Pragma("GCC unroll 6") for (int i = 0; i < NN_MR; i++)                                                    \
@@ -76,9 +76,11 @@ typedef float v8u __attribute__((vector_size(32), aligned(4), may_alias));
         ROW512(4, p3, lda);                                                                                    \
         ROW512(5, p3, l2);                                                                                     \
         p0 += ka, p3 += ka;                                                                                    \
-    }                                                                                                          \
+    }
+#define KERNEL512_STORE                                                                                        \
     _Pragma("GCC unroll 6") for (int i = 0; i < NN_MR; i++)                                                    \
         _Pragma("GCC unroll 4") for (int j = 0; j < NCH; j++) *(v16u *)(c + i * ldc + 16 * j) = r[i][j];
+#define KERNEL512_BODY(NCH_) KERNEL512_PRODUCT(NCH_) KERNEL512_STORE
 
 AVX512 static void k512_1(KARGS) { KERNEL512_BODY(1) }
 AVX512 static void k512_2(KARGS) { KERNEL512_BODY(2) }
@@ -101,6 +103,46 @@ KGROUPS512(k512g_1, 1)
 KGROUPS512(k512g_2, 2)
 KGROUPS512(k512g_3, 3)
 KGROUPS512(k512g_4, 4)
+
+/* nn_kernel_scores: the groups' products, then on the registers the two addend rows of each
+ * row (masked to the valid columns, so a table's last row may end there) and the running
+ * column maxima, before the one store. */
+#define KSCORES512(NAME, NCH_)                                                                                \
+    AVX512 static void NAME(int K, const float *restrict a, long lda, long ka, const float *restrict b0,       \
+                            long ldb, float *restrict c, long ldc, long ga, long gc, int ng,                 \
+                            const float *const *add0, const float *const *add1, int nvalid, float *colmax)   \
+    {                                                                                                        \
+        const int acc = 0;                                                                                   \
+        __mmask16 vm[4];                                                                                     \
+        for (int j = 0; j < 4; j++) {                                                                        \
+            const int n = nvalid - 16 * j;                                                                   \
+            vm[j] = n >= 16 ? (__mmask16)0xffff : n > 0 ? (__mmask16)((1u << n) - 1) : 0;                    \
+        }                                                                                                    \
+        v16 mx[NCH_];                                                                                        \
+        for (int j = 0; j < NCH_; j++) mx[j] = colmax ? (v16) * (const v16u *)(colmax + 16 * j) : (v16){0}; \
+        for (int g = 0; g < ng; g++, a += ga, c += gc) {                                                     \
+            const float *b = b0;                                                                             \
+            KERNEL512_PRODUCT(NCH_)                                                                          \
+            if (add0)                                                                                        \
+                _Pragma("GCC unroll 6") for (int i = 0; i < NN_MR; i++) {                                    \
+                    const float *x0 = add0[NN_MR * g + i], *x1 = add1[NN_MR * g + i];                        \
+                    _Pragma("GCC unroll 4") for (int j = 0; j < NCH; j++) r[i][j] +=                         \
+                        (v16)_mm512_maskz_loadu_ps(vm[j], x0 + 16 * j) +                                     \
+                        (v16)_mm512_maskz_loadu_ps(vm[j], x1 + 16 * j);                                      \
+                }                                                                                            \
+            if (colmax)                                                                                      \
+                _Pragma("GCC unroll 6") for (int i = 0; i < NN_MR; i++)                                      \
+                    _Pragma("GCC unroll 4") for (int j = 0; j < NCH; j++) mx[j] =                            \
+                        (v16)_mm512_max_ps((__m512)mx[j], (__m512)r[i][j]);                                  \
+            KERNEL512_STORE                                                                                  \
+        }                                                                                                    \
+        if (colmax)                                                                                          \
+            for (int j = 0; j < NCH_; j++) *(v16u *)(colmax + 16 * j) = mx[j];                               \
+    }
+KSCORES512(k512s_1, 1)
+KSCORES512(k512s_2, 2)
+KSCORES512(k512s_3, 3)
+KSCORES512(k512s_4, 4)
 
 /* 16 ymm registers: 6 rows x 16 columns is the widest tile that stays in them */
 AVX2 static void k256(KARGS) { KERNEL_BODY(v8, v8u, 2) }
@@ -176,4 +218,26 @@ void nn_kernel_groups(int K, const float *a, long lda, long ka, long ga, const f
         }
     }
     for (int g = 0; g < ng; g++) nn_kernel(K, a + g * ga, lda, ka, b, ldb, c + g * gc, ldc, nv, acc);
+}
+
+void nn_kernel_scores(int K, const float *a, long lda, long ka, long ga, const float *b, long ldb, float *c, long ldc,
+                      long gc, int nv, int ng, const float *const *add0, const float *const *add1, int nvalid,
+                      float *colmax)
+{
+    if (nn_isa() == NN_ISA_AVX512) {
+        switch (nv) {
+        case 1: k512s_1(K, a, lda, ka, b, ldb, c, ldc, ga, gc, ng, add0, add1, nvalid, colmax); return;
+        case 2: k512s_2(K, a, lda, ka, b, ldb, c, ldc, ga, gc, ng, add0, add1, nvalid, colmax); return;
+        case 3: k512s_3(K, a, lda, ka, b, ldb, c, ldc, ga, gc, ng, add0, add1, nvalid, colmax); return;
+        default: k512s_4(K, a, lda, ka, b, ldb, c, ldc, ga, gc, ng, add0, add1, nvalid, colmax); return;
+        }
+    }
+    nn_kernel_groups(K, a, lda, ka, ga, b, ldb, c, ldc, gc, nv, ng, 0);
+    for (int r = 0; r < NN_MR * ng; r++) {
+        float *cr = c + r / NN_MR * gc + r % NN_MR * ldc;
+        for (int j = 0; j < 16 * nv; j++) {
+            if (add0 && j < nvalid) cr[j] += add0[r][j] + add1[r][j];
+            if (colmax) colmax[j] = cr[j] > colmax[j] ? cr[j] : colmax[j];
+        }
+    }
 }

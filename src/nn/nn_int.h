@@ -26,6 +26,14 @@ void nn_kernel(int K, const float *a, long lda, long ka, const float *b, long ld
 void nn_kernel_groups(int K, const float *a, long lda, long ka, long ga, const float *b, long ldb, float *c, long ldc,
                       long gc, int nv, int ng, int acc);
 
+/* Attention's scores: nn_kernel_groups with acc = 0, then, before the store, row r of the
+ * 6 ng rows (group r / 6, row r % 6) gets add0[r][j] + add1[r][j] added for j < nvalid (with
+ * add0; only those columns of the addends are read), and colmax[j] (16 nv values) becomes the
+ * maximum of itself and column j of the rows (with colmax). */
+void nn_kernel_scores(int K, const float *a, long lda, long ka, long ga, const float *b, long ldb, float *c, long ldc,
+                      long gc, int nv, int ng, const float *const *add0, const float *const *add1, int nvalid,
+                      float *colmax);
+
 /* ---- the product driver (gemm.c) ------------------------------------------------------- */
 /* Where the columns of B come from. */
 enum {
@@ -105,8 +113,9 @@ float nn_exp_sum(float *x, long n, float m);
 void nn_exp_rows(float *s, long lds, int rows, const float *m, float *sum, int n);
 /* One block of keys of an online softmax over the columns of s [rows x n] (n a multiple of 16):
  * m (running maxima) and l (running sums) are updated, s becomes exp(s - m_new), and
- * corr[i] = exp(m_old - m_new) is the factor for what was accumulated before. */
-void nn_online_softmax(float *s, long lds, int rows, int n, float *m, float *l, float *corr);
+ * corr[i] = exp(m_old - m_new) is the factor for what was accumulated before. bmax, if not
+ * NULL, holds the block's column maxima already (as nn_kernel_scores takes them). */
+void nn_online_softmax(float *s, long lds, int rows, int n, const float *bmax, float *m, float *l, float *corr);
 
 /* dst[c*ldd + r] = src[r*lds + c] * (rscale ? rscale[c] : scale) for c < nc, r < w, where
  * rows r >= nr of src read as 0 (w >= nr; only rows < nr and columns < nc of src are read). */
