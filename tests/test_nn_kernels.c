@@ -328,6 +328,11 @@ TEST(attention_against_reference)
     g3d_nn_bias_dense bd = {dense, 130 * 250, 250}, bd49 = {dense, 49 * 49, 49};
     /* per window (3) and head (2): rh [4 keys rows x 20], rw [5 x 20] */
     g3d_nn_bias_relpos rp = {tables, tables + 3 * 2 * 4 * 20, 20, 4, 5, 2};
+    /* SAM's windows of 14 x 14 (2 windows, 3 heads: more keys and values than fit the tiles of
+     * every head, so a head at a time) and 77 keys on a 7 x 11 grid, the terms added by the
+     * kernel */
+    float *t196 = rnd(2 * 3 * (14 + 14) * 196, 9, 1), *t77 = rnd(2 * (7 + 11) * 77, 10, 1);
+    g3d_nn_bias_relpos rp196 = {t196, t196 + 2 * 3 * 14 * 196, 196, 14, 14, 3}, rp77 = {t77, t77 + 2 * 7 * 77, 77, 7, 11, 2};
     struct {
         g3d_nn_attn a;
         const char *what;
@@ -347,6 +352,12 @@ TEST(attention_against_reference)
           .bias_ctx = &rp},
          "3 windows, relative positions"},
         {{.nq = 200, .nk = 77, .heads = 5, .hd = 40, .scale = 0.15f}, "SD cross-attention shape, 4 query blocks"},
+        {{.nq = 100, .nk = 77, .heads = 4, .hd = 120, .scale = 0.09f}, "77 keys, a head at a time"},
+        {{.nq = 196, .nk = 196, .heads = 3, .hd = 64, .scale = 0.125f, .batch = 2, .bias = g3d_nn_bias_relpos_fn,
+          .bias_ctx = &rp196},
+         "2 SAM windows, relative positions"},
+        {{.nq = 77, .nk = 77, .heads = 2, .hd = 40, .scale = 0.15f, .bias = g3d_nn_bias_relpos_fn, .bias_ctx = &rp77},
+         "77 tokens, relative positions"},
         {{.nq = 196, .nk = 196, .heads = 3, .hd = 64, .scale = 0.125f, .batch = 2}, "2 windows of 196, last block split"},
         {{.nq = 70, .nk = 300, .heads = 2, .hd = 256, .hdv = 250, .scale = 0.06f}, "wide heads, values transposed"},
         {{.nq = 20, .nk = 3, .heads = 3, .hd = 10, .hdv = 7, .scale = 0.3f}, "three keys, odd value heads"},
@@ -354,7 +365,7 @@ TEST(attention_against_reference)
         {{.nq = 9, .nk = 0, .heads = 2, .hd = 8, .scale = 1}, "no keys"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) check_attention(cases[i].a, 100 + i, cases[i].what);
-    free(dense), free(tables);
+    free(dense), free(tables), free(t196), free(t77);
     g3d_nn_attn bad = {.nq = 3, .nk = 3, .heads = 0, .hd = 4};
     CHECK_FAILS(g3d_nn_attend(&bad));
     bad.heads = 2, bad.ldq = 5;

@@ -20,6 +20,7 @@
 #define KB 240 /* most keys per block (blocks are balanced: 196 keys are one block) */
 #define NK_SHORT KB /* key sets of one block */
 #define VT_MIN 32768 /* key blocks of more values than this go through a transposed copy */
+#define ALL_HEADS_KV 65536 /* most key and value floats (all heads) for tiles of every head */
 
 static int rup6(int x) { return (x + NN_MR - 1) / NN_MR * NN_MR; }
 
@@ -30,7 +31,8 @@ typedef struct tiles {
     const float *rel[2][KB]; /* per row of the score tile: its rows of the relative-position tables */
 } tiles;
 
-/* The next block a thread computes: head h, queries q0 .. q0+n-1 of problem b (n = 0: none);
+/* The next block a thread computes: head h, queries q0 .. q0+n-1 of problem b (n = 0: none;
+ * h = -1: rows q0 .. q0+n-1 whole, fetched by the score kernel);
  * and rows kv0 .. kv1-1 of the keys and values of head kvh of problem b, to be fetched while
  * this block computes (kv1 = 0: none). */
 typedef struct next_block {
@@ -84,7 +86,10 @@ static void query_block(int nq, int i, int *q0, int *n)
     *q0 = (nqb - 2) * QB + (i == nqb - 1 ? first : 0), *n = i == nqb - 1 ? QB + rem - first : first;
 }
 
-static void task(const g3d_nn_attn *in, tiles *T, int b, int h, int q0, int nqv, const next_block *nx)
+/* Head h of queries q0 .. q0+nqv-1 of problem b. With all_heads, the caller has put every head's
+ * queries in the tile (head h at row h hd) and writes every head's outputs from it at once: this
+ * leaves head h's (normalised) at row h hdv of the output tile. */
+static void task(const g3d_nn_attn *in, tiles *T, int b, int h, int q0, int nqv, const next_block *nx, int all_heads)
 {
     /* problem b of a batch: the same descriptor with its pointers moved */
     g3d_nn_attn pb = *in;
@@ -93,8 +98,10 @@ static void task(const g3d_nn_attn *in, tiles *T, int b, int h, int q0, int nqv,
     const int hd = a->hd, hdv = a->hdv;
     const int nvq = (nqv + 15) / 16, QW = 16 * nvq;
     float *qt = T->qt, *st = T->st, *ot = T->ot, *m = T->m, *l = T->l, *corr = T->t1;
-    /* queries of the block, scaled, as columns */
-    nn_transpose_tile(a->q + (long)q0 * a->ldq + h * hd, a->ldq, nqv, hd, qt, QB, QW, a->scale, NULL);
+    if (all_heads)
+        qt += (size_t)h * hd * QB, ot += (size_t)h * hdv * QB;
+    else /* queries of the block, scaled, as columns */
+        nn_transpose_tile(a->q + (long)q0 * a->ldq + h * hd, a->ldq, nqv, hd, qt, QB, QW, a->scale, NULL);
     for (int i = 0; i < QB; i++) m[i] = -INFINITY, l[i] = 0.0f;
     /* causal: query q0+i sees keys j <= q0 + i + shift */
     const int shift = a->nk - a->nq;
@@ -126,13 +133,21 @@ static void task(const g3d_nn_attn *in, tiles *T, int b, int h, int q0, int nqv,
             }
         /* S^T = K_blk (scale q)^T: the whole groups of six keys in one kernel call (in runs of
          * four with the prefetches of the next block between them, where there is one) */
-        const int nfull = kb / NN_MR, run = nx->n ? 4 : nfull;
+        const int nfull = kb / NN_MR, run = nx->n && nx->h >= 0 ? 4 : nfull;
+        /* whole rows of the next block: consecutive, so the kernel fetches them a line per step */
+        const char *pf0 = NULL, *pf1 = NULL;
+        int npf = 0;
+        if (k0 == 0 && nx->n && nx->h < 0) {
+            pf0 = (const char *)(in->q + nx->b * in->bsq + (long)nx->q0 * in->ldq);
+            pf1 = (const char *)(in->out + nx->b * in->bso + (long)nx->q0 * in->ldo);
+            npf = (int)((sizeof(float) * (size_t)nx->n * (size_t)(in->ldq > in->ldo ? in->ldq : in->ldo) + 63) / 64);
+        }
         for (int g0 = 0; g0 < nfull; g0 += run) {
             const int ng = nfull - g0 < run ? nfull - g0 : run;
             nn_kernel_scores(hd, a->k + (long)(k0 + NN_MR * g0) * a->ldk + h * hd, a->ldk, 1, NN_MR * a->ldk, qt, QB,
                              st + NN_MR * g0 * QB, QB, NN_MR * QB, nvq, ng, r0 ? r0 + NN_MR * g0 : NULL,
-                             r1 + NN_MR * g0, nqv, bm);
-            if (k0 == 0) {
+                             r1 + NN_MR * g0, nqv, bm, pf0, pf1, npf);
+            if (k0 == 0 && nx->h >= 0) {
                 prefetch_rows(in, nx, NN_MR * g0, g0 + ng == nfull ? QB : NN_MR * (g0 + ng));
                 const int kvn = nx->kv1 - nx->kv0;
                 prefetch_kv(in, nx, nx->kv0 + kvn * g0 / nfull, nx->kv0 + kvn * (g0 + ng) / nfull);
@@ -148,9 +163,10 @@ static void task(const g3d_nn_attn *in, tiles *T, int b, int h, int q0, int nqv,
                 for (int i = 0; i < NN_MR; i++)
                     for (int d = 0; d < hd; d++) T->edge[i * hd + d] = i < kb ? ka[i * a->ldk + d] : 0.0f;
                 ka = T->edge, lda = hd;
-                if (k0 == 0) prefetch_rows(in, nx, 0, QB), prefetch_kv(in, nx, nx->kv0, nx->kv1);
+                if (k0 == 0 && nx->h >= 0) prefetch_rows(in, nx, 0, QB), prefetch_kv(in, nx, nx->kv0, nx->kv1);
             }
-            nn_kernel_scores(hd, ka, lda, 1, 0, qt, QB, st + r * QB, QB, 0, nvq, 1, r0 ? r0 + r : NULL, r1 + r, nqv, bm);
+            nn_kernel_scores(hd, ka, lda, 1, 0, qt, QB, st + r * QB, QB, 0, nvq, 1, r0 ? r0 + r : NULL, r1 + r, nqv, bm,
+                             nfull ? NULL : pf0, pf1, nfull ? 0 : npf);
         }
         if (a->bias && !rp) a->bias(a->bias_ctx, b, h, q0, nqv, k0, kb, st, 1, QB);
         if (a->causal)
@@ -188,7 +204,12 @@ static void task(const g3d_nn_attn *in, tiles *T, int b, int h, int q0, int nqv,
     }
     if (kend <= 0) memset(ot, 0, sizeof(float) * (size_t)hdv * QB);
     for (int i = 0; i < nqv; i++) corr[i] = l[i] > 0.0f ? 1.0f / l[i] : 0.0f;
-    nn_transpose_tile(ot, QB, hdv, nqv, a->out + (long)q0 * a->ldo + h * hdv, a->ldo, hdv, 1.0f, corr);
+    if (!all_heads) {
+        nn_transpose_tile(ot, QB, hdv, nqv, a->out + (long)q0 * a->ldo + h * hdv, a->ldo, hdv, 1.0f, corr);
+        return;
+    }
+    for (int d = 0; d < hdv; d++)
+        for (int i = 0; i < QW; i++) ot[d * QB + i] *= corr[i];
 }
 
 /* The descriptor with its defaults filled in, or an error. */
@@ -222,6 +243,12 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
      * cache from one head to the next and the next block's are fetched ahead; fewer blocks where
      * that would leave less than 16 tasks per thread (the last task keeps the others waiting). */
     const int shortk = a.nk <= NK_SHORT, nqb = (a.nq + QB - 1) / QB;
+    /* Where every head's keys and values fit in L2 together (SD's text cross-attention: 200 KB),
+     * a block's queries and outputs go through their tiles for all heads at once (80 KB each for
+     * SD): whole rows in and out and 16-wide blocks only, where a head at a time had transposed
+     * 40-wide slices (a third of the blocks half empty) and had written each output line in
+     * parts. */
+    const int all_heads = shortk && (long)a.nk * a.heads * (a.hd + a.hdv) <= ALL_HEADS_KV;
     int g = a.batch * nqb / (16 * nth);
     g = g < 1 ? 1 : g > 4 ? 4 : g;
     const int nch = (nqb + g - 1) / g, ntask = shortk ? a.batch * nch : a.batch * a.heads * nqb;
@@ -232,14 +259,16 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
     {
         tiles T = {0};
         const size_t nvt = a.hdv * KB > VT_MIN ? (size_t)rup6(a.hdv) * KB : 0;
-        size_t nbuf = (size_t)(a.hd + KB + rup6(a.hdv) + 4) * QB + edge + nvt;
+        const size_t nqt = all_heads ? (size_t)a.heads * a.hd : (size_t)a.hd,
+                     not = all_heads ? (size_t)a.heads * a.hdv + NN_MR : (size_t)rup6(a.hdv);
+        size_t nbuf = (nqt + KB + not + 4) * QB + edge + nvt;
         float *buf = aligned_alloc(64, (sizeof(float) * nbuf + 63) / 64 * 64);
         if (!buf) {
 #pragma omp atomic write
             failed = 1;
         } else {
-            T.qt = buf, T.st = T.qt + (size_t)a.hd * QB, T.ot = T.st + (size_t)KB * QB;
-            T.m = T.ot + (size_t)rup6(a.hdv) * QB, T.l = T.m + QB, T.t1 = T.l + QB, T.bm = T.t1 + QB;
+            T.qt = buf, T.st = T.qt + nqt * QB, T.ot = T.st + (size_t)KB * QB;
+            T.m = T.ot + not * QB, T.l = T.m + QB, T.t1 = T.l + QB, T.bm = T.t1 + QB;
             T.edge = T.bm + QB;
             if (nvt) {
                 /* its rows past hdv feed only the tile's spare rows, but must be numbers */
@@ -254,10 +283,29 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
             if (!shortk) {
                 const next_block none = {0};
                 query_block(a.nq, t % nqb, &q0, &n);
-                task(&a, &T, t / (a.heads * nqb), t / nqb % a.heads, q0, n, &none);
+                task(&a, &T, t / (a.heads * nqb), t / nqb % a.heads, q0, n, &none, 0);
                 continue;
             }
             const int b = t / nch, i0 = t % nch * g, i1 = nqb - i0 < g ? nqb : i0 + g;
+            if (all_heads) {
+                for (int i = i0; i < i1; i++) {
+                    query_block(a.nq, i, &q0, &n);
+                    nn_transpose_tile(a.q + b * a.bsq + (long)q0 * a.ldq, a.ldq, n, a.heads * a.hd, T.qt, QB,
+                                      (n + 15) / 16 * 16, a.scale, NULL);
+                    int nq0 = 0, nn = 0;
+                    if (i + 1 < i1) query_block(a.nq, i + 1, &nq0, &nn);
+                    for (int h = 0; h < a.heads; h++) {
+                        /* a share of the next block's whole rows (consecutive in memory, as the
+                         * hardware prefetcher follows them) with each head */
+                        const int r0 = nn * h / a.heads, r1 = nn * (h + 1) / a.heads;
+                        const next_block nx = {b, -1, nq0 + r0, r1 - r0, 0, 0, 0};
+                        task(&a, &T, b, h, q0, n, &nx, 1);
+                    }
+                    nn_transpose_tile(T.ot, QB, a.heads * a.hdv, n, a.out + b * a.bso + (long)q0 * a.ldo, a.ldo,
+                                      a.heads * a.hdv, 1.0f, NULL);
+                }
+                continue;
+            }
             for (int h = 0; h < a.heads; h++)
                 for (int i = i0; i < i1; i++) {
                     /* the next block of this head, else the first of the next head */
@@ -265,7 +313,7 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
                     if (h + 1 < a.heads) nx.kv0 = (i - i0) * a.nk / (i1 - i0), nx.kv1 = (i + 1 - i0) * a.nk / (i1 - i0);
                     if (nx.h < a.heads) query_block(a.nq, i + 1 < i1 ? i + 1 : i0, &nx.q0, &nx.n);
                     query_block(a.nq, i, &q0, &n);
-                    task(&a, &T, b, h, q0, n, &nx);
+                    task(&a, &T, b, h, q0, n, &nx, 0);
                 }
         }
         free(buf);

@@ -57,7 +57,7 @@ typedef float v8u __attribute__((vector_size(32), aligned(4), may_alias));
         const v16 x = _mm512_set1_ps((P)[OFF]);                                                                \
         _Pragma("GCC unroll 4") for (int j = 0; j < NCH; j++) r[R][j] += x * bv[j];                            \
     } while (0)
-#define KERNEL512_PRODUCT(NCH_)                                                                                \
+#define KERNEL512_PRODUCT(NCH_, STEP)                                                                            \
     enum { NCH = NCH_ };                                                                                       \
     v16 r[NN_MR][NCH];                                                                                         \
     _Pragma("GCC unroll 6") for (int i = 0; i < NN_MR; i++)                                                    \
@@ -76,11 +76,12 @@ typedef float v8u __attribute__((vector_size(32), aligned(4), may_alias));
         ROW512(4, p3, lda);                                                                                    \
         ROW512(5, p3, l2);                                                                                     \
         p0 += ka, p3 += ka;                                                                                    \
+        STEP                                                                                                   \
     }
 #define KERNEL512_STORE                                                                                        \
     _Pragma("GCC unroll 6") for (int i = 0; i < NN_MR; i++)                                                    \
         _Pragma("GCC unroll 4") for (int j = 0; j < NCH; j++) *(v16u *)(c + i * ldc + 16 * j) = r[i][j];
-#define KERNEL512_BODY(NCH_) KERNEL512_PRODUCT(NCH_) KERNEL512_STORE
+#define KERNEL512_BODY(NCH_) KERNEL512_PRODUCT(NCH_, ) KERNEL512_STORE
 
 AVX512 static void k512_1(KARGS) { KERNEL512_BODY(1) }
 AVX512 static void k512_2(KARGS) { KERNEL512_BODY(2) }
@@ -104,13 +105,20 @@ KGROUPS512(k512g_2, 2)
 KGROUPS512(k512g_3, 3)
 KGROUPS512(k512g_4, 4)
 
+/* one line of each prefetch range per step, while any is left */
+#define KSCORES_PREFETCH                                                                                      \
+    if (npf > 0) {                                                                                            \
+        __builtin_prefetch(pf0, 0, 2), __builtin_prefetch(pf1, 1, 2);                                         \
+        pf0 += 64, pf1 += 64, npf--;                                                                          \
+    }
 /* nn_kernel_scores: the groups' products, then on the registers the two addend rows of each
  * row (masked to the valid columns, so a table's last row may end there) and the running
  * column maxima, before the one store. */
 #define KSCORES512(NAME, NCH_)                                                                                \
     AVX512 static void NAME(int K, const float *restrict a, long lda, long ka, const float *restrict b0,       \
                             long ldb, float *restrict c, long ldc, long ga, long gc, int ng,                 \
-                            const float *const *add0, const float *const *add1, int nvalid, float *colmax)   \
+                            const float *const *add0, const float *const *add1, int nvalid, float *colmax,   \
+                            const char *pf0, const char *pf1, int npf)                                       \
     {                                                                                                        \
         const int acc = 0;                                                                                   \
         __mmask16 vm[4];                                                                                     \
@@ -122,7 +130,7 @@ KGROUPS512(k512g_4, 4)
         for (int j = 0; j < NCH_; j++) mx[j] = colmax ? (v16) * (const v16u *)(colmax + 16 * j) : (v16){0}; \
         for (int g = 0; g < ng; g++, a += ga, c += gc) {                                                     \
             const float *b = b0;                                                                             \
-            KERNEL512_PRODUCT(NCH_)                                                                          \
+            KERNEL512_PRODUCT(NCH_, KSCORES_PREFETCH)                                                        \
             if (add0)                                                                                        \
                 _Pragma("GCC unroll 6") for (int i = 0; i < NN_MR; i++) {                                    \
                     const float *x0 = add0[NN_MR * g + i], *x1 = add1[NN_MR * g + i];                        \
@@ -222,16 +230,17 @@ void nn_kernel_groups(int K, const float *a, long lda, long ka, long ga, const f
 
 void nn_kernel_scores(int K, const float *a, long lda, long ka, long ga, const float *b, long ldb, float *c, long ldc,
                       long gc, int nv, int ng, const float *const *add0, const float *const *add1, int nvalid,
-                      float *colmax)
+                      float *colmax, const char *pf0, const char *pf1, int npf)
 {
     if (nn_isa() == NN_ISA_AVX512) {
         switch (nv) {
-        case 1: k512s_1(K, a, lda, ka, b, ldb, c, ldc, ga, gc, ng, add0, add1, nvalid, colmax); return;
-        case 2: k512s_2(K, a, lda, ka, b, ldb, c, ldc, ga, gc, ng, add0, add1, nvalid, colmax); return;
-        case 3: k512s_3(K, a, lda, ka, b, ldb, c, ldc, ga, gc, ng, add0, add1, nvalid, colmax); return;
-        default: k512s_4(K, a, lda, ka, b, ldb, c, ldc, ga, gc, ng, add0, add1, nvalid, colmax); return;
+        case 1: k512s_1(K, a, lda, ka, b, ldb, c, ldc, ga, gc, ng, add0, add1, nvalid, colmax, pf0, pf1, npf); return;
+        case 2: k512s_2(K, a, lda, ka, b, ldb, c, ldc, ga, gc, ng, add0, add1, nvalid, colmax, pf0, pf1, npf); return;
+        case 3: k512s_3(K, a, lda, ka, b, ldb, c, ldc, ga, gc, ng, add0, add1, nvalid, colmax, pf0, pf1, npf); return;
+        default: k512s_4(K, a, lda, ka, b, ldb, c, ldc, ga, gc, ng, add0, add1, nvalid, colmax, pf0, pf1, npf); return;
         }
     }
+    for (int i = 0; i < npf; i++) __builtin_prefetch(pf0 + 64 * i, 0, 2), __builtin_prefetch(pf1 + 64 * i, 1, 2);
     nn_kernel_groups(K, a, lda, ka, ga, b, ldb, c, ldc, gc, nv, ng, 0);
     for (int r = 0; r < NN_MR * ng; r++) {
         float *cr = c + r / NN_MR * gc + r % NN_MR * ldc;

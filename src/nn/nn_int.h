@@ -29,10 +29,11 @@ void nn_kernel_groups(int K, const float *a, long lda, long ka, long ga, const f
 /* Attention's scores: nn_kernel_groups with acc = 0, then, before the store, row r of the
  * 6 ng rows (group r / 6, row r % 6) gets add0[r][j] + add1[r][j] added for j < nvalid (with
  * add0; only those columns of the addends are read), and colmax[j] (16 nv values) becomes the
- * maximum of itself and column j of the rows (with colmax). */
+ * maximum of itself and column j of the rows (with colmax). The npf 64-byte lines from pf0 (to
+ * be read) and from pf1 (to be written) are fetched into L2 along the way, one of each per step. */
 void nn_kernel_scores(int K, const float *a, long lda, long ka, long ga, const float *b, long ldb, float *c, long ldc,
                       long gc, int nv, int ng, const float *const *add0, const float *const *add1, int nvalid,
-                      float *colmax);
+                      float *colmax, const char *pf0, const char *pf1, int npf);
 
 /* ---- the product driver (gemm.c) ------------------------------------------------------- */
 /* Where the columns of B come from. */
