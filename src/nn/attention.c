@@ -251,7 +251,17 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
     const int all_heads = shortk && (long)a.nk * a.heads * (a.hd + a.hdv) <= ALL_HEADS_KV;
     int g = a.batch * nqb / (16 * nth);
     g = g < 1 ? 1 : g > 4 ? 4 : g;
-    const int nch = (nqb + g - 1) / g, ntask = shortk ? a.batch * nch : a.batch * a.heads * nqb;
+    /* Many problems (windows) with a head at a time: a task is a group of heads of one problem
+     * and all its query blocks, as few groups as give 16 tasks per thread, so each head's keys
+     * and values are read by one task (with SAM's windows in blocks of 3 + 1 for two threads,
+     * both tasks of a window had read its 1.2 MB of keys and values). */
+    int hg = 0;
+    if (shortk && !all_heads && a.batch * a.heads >= 16 * nth) {
+        hg = (16 * nth + a.batch - 1) / a.batch;
+        hg = hg > a.heads ? a.heads : hg;
+        g = nqb;
+    }
+    const int nch = hg ? hg : (nqb + g - 1) / g, ntask = shortk ? a.batch * nch : a.batch * a.heads * nqb;
     if (nth > ntask) nth = ntask;
     const int edge = NN_MR * (a.hd > KB ? a.hd : KB);
     int failed = 0;
@@ -286,7 +296,8 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
                 task(&a, &T, t / (a.heads * nqb), t / nqb % a.heads, q0, n, &none, 0);
                 continue;
             }
-            const int b = t / nch, i0 = t % nch * g, i1 = nqb - i0 < g ? nqb : i0 + g;
+            const int b = t / nch, i0 = hg ? 0 : t % nch * g, i1 = hg ? nqb : nqb - i0 < g ? nqb : i0 + g;
+            const int h0 = hg ? t % nch * a.heads / hg : 0, h1 = hg ? (t % nch + 1) * a.heads / hg : a.heads;
             if (all_heads) {
                 for (int i = i0; i < i1; i++) {
                     query_block(a.nq, i, &q0, &n);
@@ -306,12 +317,12 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
                 }
                 continue;
             }
-            for (int h = 0; h < a.heads; h++)
+            for (int h = h0; h < h1; h++)
                 for (int i = i0; i < i1; i++) {
                     /* the next block of this head, else the first of the next head */
                     next_block nx = {b, i + 1 < i1 ? h : h + 1, 0, 0, h + 1, 0, 0};
-                    if (h + 1 < a.heads) nx.kv0 = (i - i0) * a.nk / (i1 - i0), nx.kv1 = (i + 1 - i0) * a.nk / (i1 - i0);
-                    if (nx.h < a.heads) query_block(a.nq, i + 1 < i1 ? i + 1 : i0, &nx.q0, &nx.n);
+                    if (h + 1 < h1) nx.kv0 = (i - i0) * a.nk / (i1 - i0), nx.kv1 = (i + 1 - i0) * a.nk / (i1 - i0);
+                    if (nx.h < h1) query_block(a.nq, i + 1 < i1 ? i + 1 : i0, &nx.q0, &nx.n);
                     query_block(a.nq, i, &q0, &n);
                     task(&a, &T, b, h, q0, n, &nx, 0);
                 }
