@@ -321,7 +321,9 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
                 for (int i = i0; i < i1; i++) {
                     /* the next block of this head, else the first of the next head */
                     next_block nx = {b, i + 1 < i1 ? h : h + 1, 0, 0, h + 1, 0, 0};
-                    if (h + 1 < h1) nx.kv0 = (i - i0) * a.nk / (i1 - i0), nx.kv1 = (i + 1 - i0) * a.nk / (i1 - i0);
+                    /* a task's keys and values come from memory only with groups of heads (one
+                     * problem's are shared by all tasks, and fetching them ahead had cost 1 %) */
+                    if (hg && h + 1 < h1) nx.kv0 = (i - i0) * a.nk / (i1 - i0), nx.kv1 = (i + 1 - i0) * a.nk / (i1 - i0);
                     if (nx.h < h1) query_block(a.nq, i + 1 < i1 ? i + 1 : i0, &nx.q0, &nx.n);
                     query_block(a.nq, i, &q0, &n);
                     task(&a, &T, b, h, q0, n, &nx, 0);
