@@ -70,7 +70,8 @@ void g3d_nn_bias_dense_fn(void *ctx, int batch, int head, int q0, int nq, int k0
  * index y*width + x); with t = batch*heads + head, bias(t, q, k) = rh[(t*kh + ky)*nq + q] +
  * rw[(t*kw + kx)*nq + q] and (ky, kx) the key's grid position (tables key-major: the attention
  * adds them a key at a time across 64 queries). Fill them with g3d_nn_relpos_tables, once per
- * problem of a batch (at rh + b*heads*kh*nq, rw + b*heads*kw*nq). */
+ * problem of a batch (at rh + b*heads*kh*nq, rw + b*heads*kw*nq). g3d_nn_attend recognises
+ * this function as a.bias and adds the terms inside its score kernel instead of calling it. */
 typedef struct g3d_nn_bias_relpos {
     const float *rh, *rw;
     int nq, kh, kw, heads;
