@@ -21,6 +21,7 @@
 #define NK_SHORT KB /* key sets of one block */
 #define VT_MIN 32768 /* key blocks of more values than this go through a transposed copy */
 #define ALL_HEADS_KV 65536 /* most key and value floats (all heads) for tiles of every head */
+#define ALL_HEADS_W 1024   /* and most channels of queries and values (all heads): 256 KB of tiles */
 
 static int rup6(int x) { return (x + NN_MR - 1) / NN_MR * NN_MR; }
 
@@ -248,7 +249,8 @@ g3d_status g3d_nn_attend(const g3d_nn_attn *desc)
      * SD): whole rows in and out and 16-wide blocks only, where a head at a time had transposed
      * 40-wide slices (a third of the blocks half empty) and had written each output line in
      * parts. */
-    const int all_heads = shortk && (long)a.nk * a.heads * (a.hd + a.hdv) <= ALL_HEADS_KV;
+    const int all_heads = shortk && (long)a.nk * a.heads * (a.hd + a.hdv) <= ALL_HEADS_KV &&
+                          (long)a.heads * (a.hd + a.hdv) <= ALL_HEADS_W;
     int g = a.batch * nqb / (16 * nth);
     g = g < 1 ? 1 : g > 4 ? 4 : g;
     /* Many problems (windows) with a head at a time: a task is a group of heads of one problem
