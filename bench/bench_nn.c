@@ -8,7 +8,11 @@
  *   cmake --build build --target bench && ./build/bench_nn [filter] [--reps N]
  * `filter` keeps the cases whose name contains it. Work counts are multiply-adds x 2 of the
  * operator's definition (also for Winograd, which does fewer). A last table sums up per op
- * kind (linear, attention, conv3, conv3w, conv1, convT, ...): the median and lowest fraction. */
+ * kind (linear, attention, conv3, conv3w, conv1, convT, ...): the median and lowest fraction.
+ * Operators that do a few operations per value they read (depthwise convolution, norms,
+ * activations) are bound by memory, not arithmetic: their own table gives the bytes they must
+ * move (each input read once, each output written once) per second, as a fraction of a
+ * streaming pass y = a x + b over as many bytes, timed in alternation the same way. */
 #include "gen3d/nn.h"
 
 #include <cblas.h>
@@ -24,17 +28,18 @@ static int g_reps = 5, g_threads, g_ran;
 static const char *g_filter;
 static float *g_a, *g_b, *g_c;
 
-/* Per op kind (the first word of a case's name): the cases' fractions of sgemm, for the summary. */
+/* Per op kind (the first word of a case's name): the cases' fractions of their reference
+ * (sgemm, or the streaming pass for memory-bound kinds), for the summaries. */
 #define MAX_KINDS 16
 static struct {
     char name[16];
-    int n;
+    int n, memory;
     double frac[64];
 } g_kinds[MAX_KINDS];
-static int g_nkinds;
-static double g_sgemm_lo = 1e30, g_sgemm_hi;
+static int g_nkinds, g_mem_header;
+static double g_sgemm_lo = 1e30, g_sgemm_hi, g_stream_lo = 1e30, g_stream_hi;
 
-static void note_kind(const char *name, double frac)
+static void note_kind(const char *name, int memory, double frac)
 {
     char k[16];
     snprintf(k, sizeof k, "%.*s", (int)strcspn(name, " "), name);
@@ -42,6 +47,7 @@ static void note_kind(const char *name, double frac)
     while (i < g_nkinds && strcmp(g_kinds[i].name, k)) i++;
     if (i == MAX_KINDS) return;
     if (i == g_nkinds) snprintf(g_kinds[g_nkinds++].name, sizeof g_kinds[i].name, "%s", k);
+    g_kinds[i].memory = memory;
     if (g_kinds[i].n < 64) g_kinds[i].frac[g_kinds[i].n++] = frac;
 }
 
@@ -72,6 +78,16 @@ static double sgemm_rate(double *cpu_rate)
     return 2.0 * n * n * n / (g3d_time_now() - t0) * 1e-9;
 }
 
+/* GB/s of one pass y = 1.5 x + 0.5 over n floats (n read, n written) on the same threads */
+static double stream_rate(const float *x, float *y, long n, double *cpu_rate)
+{
+    double t0 = g3d_time_now(), c0 = cpu_now();
+#pragma omp parallel for schedule(static)
+    for (long i = 0; i < n; i++) y[i] = 1.5f * x[i] + 0.5f;
+    *cpu_rate = 8.0 * n / (cpu_now() - c0) * 1e-9;
+    return 8.0 * n / (g3d_time_now() - t0) * 1e-9;
+}
+
 typedef void (*case_fn)(void *ctx);
 
 static int cmp_double(const void *a, const void *b)
@@ -88,15 +104,40 @@ static void settle(void)
     nanosleep(&t, NULL);
 }
 
-/* Times fn against sgemm in alternation: each round runs one sgemm and then fn (repeated to
- * last at least ~50 ms); the row shows the median wall and CPU time of fn (CPU time of all
- * threads, so about threads x wall when they are all busy) and the median over rounds of
- * (rate of fn) / (rate of the sgemm just before it), which cancels most of the drift of a
- * shared machine, in wall time and in CPU time (the steadier one while other jobs take turns
- * on the cores: a part that waits for a core is not charged for the wait). */
-static void run(const char *name, const char *shape, double flops, case_fn fn, void *ctx)
+static void mem_header(void)
+{
+    if (g_mem_header++) return;
+    printf("\nmemory-bound operators (bytes each must move, against a streaming pass over as many):\n");
+    printf("| %-26s | %-36s | %8s | %9s | %9s | %7s | %7s | %9s |\n", "operator", "shape", "MB", "ms", "cpu ms",
+           "GB/s", "stream", "stream cpu");
+    printf("|%s|%s|%s|%s|%s|%s|%s|%s|\n", "----------------------------", "--------------------------------------",
+           "----------", "-----------", "-----------", "---------", "---------", "------------");
+}
+
+/* Times fn against its reference in alternation: each round runs the reference (one sgemm, or
+ * for a memory-bound operator, bytes > 0, a streaming pass over as many bytes) and then fn
+ * (repeated to last at least ~50 ms); the row shows the median wall and CPU time of fn (CPU
+ * time of all threads, so about threads x wall when they are all busy) and the median over
+ * rounds of (rate of fn) / (rate of the reference just before it), which cancels most of the
+ * drift of a shared machine, in wall time and in CPU time (the steadier one while other jobs
+ * take turns on the cores: a part that waits for a core is not charged for the wait). An
+ * operator with neither flops nor bytes (the FFTs) is timed alone. */
+static void run(const char *name, const char *shape, double flops, double bytes, case_fn fn, void *ctx)
 {
     if (g_filter && !strstr(name, g_filter)) return;
+    const int memory = flops <= 0;
+    const double work = memory ? bytes : flops;
+    const long sn = (long)(bytes / 8);
+    float *sx = NULL, *sy = NULL;
+    if (sn > 0) {
+        sx = malloc(sizeof(float) * sn), sy = malloc(sizeof(float) * sn);
+        if (!sx || !sy) {
+            fprintf(stderr, "bench_nn: out of memory\n");
+            exit(1);
+        }
+        for (long i = 0; i < sn; i++) sx[i] = (float)(i & 1023), sy[i] = 0.0f;
+    }
+    if (memory) mem_header();
     double t0 = g3d_time_now();
     fn(ctx); /* warm-up: first-touch of buffers, FFT plans */
     double once = g3d_time_now() - t0;
@@ -105,17 +146,24 @@ static void run(const char *name, const char *shape, double flops, case_fn fn, v
     int reps = g_reps < 64 ? g_reps : 64;
     for (int r = 0; r < reps; r++) {
         settle();
-        double cbase, base = sgemm_rate(&cbase);
-        g_sgemm_lo = base < g_sgemm_lo ? base : g_sgemm_lo;
-        g_sgemm_hi = base > g_sgemm_hi ? base : g_sgemm_hi;
+        double cbase = 1, base = 1;
+        if (!memory) {
+            base = sgemm_rate(&cbase);
+            g_sgemm_lo = base < g_sgemm_lo ? base : g_sgemm_lo;
+            g_sgemm_hi = base > g_sgemm_hi ? base : g_sgemm_hi;
+        } else if (sn > 0) {
+            base = stream_rate(sx, sy, sn, &cbase);
+            g_stream_lo = base < g_stream_lo ? base : g_stream_lo;
+            g_stream_hi = base > g_stream_hi ? base : g_stream_hi;
+        }
         settle();
         t0 = g3d_time_now();
         double c0 = cpu_now();
         for (int i = 0; i < inner; i++) fn(ctx);
         t[r] = (g3d_time_now() - t0) / inner;
         cpu[r] = (cpu_now() - c0) / inner;
-        ratio[r] = flops / t[r] * 1e-9 / base;
-        cratio[r] = flops / cpu[r] * 1e-9 / cbase;
+        ratio[r] = work / t[r] * 1e-9 / base;
+        cratio[r] = work / cpu[r] * 1e-9 / cbase;
     }
     qsort(t, reps, sizeof *t, cmp_double);
     qsort(cpu, reps, sizeof *cpu, cmp_double);
@@ -123,14 +171,17 @@ static void run(const char *name, const char *shape, double flops, case_fn fn, v
     qsort(cratio, reps, sizeof *cratio, cmp_double);
     double tm = t[reps / 2], cm = cpu[reps / 2], rm = ratio[reps / 2], crm = cratio[reps / 2];
     g_ran++;
-    if (flops > 0) note_kind(name, rm);
-    if (flops > 0)
-        printf("| %-26s | %-36s | %8.2f | %9.2f | %9.2f | %7.1f | %5.0f %% | %7.0f %% |\n", name, shape, flops * 1e-9,
-               tm * 1e3, cm * 1e3, flops / tm * 1e-9, 100.0 * rm, 100.0 * crm);
-    else
-        printf("| %-26s | %-36s | %8s | %9.2f | %9.2f | %7s | %7s | %9s |\n", name, shape, "-", tm * 1e3, cm * 1e3, "-",
+    if (work > 0) {
+        note_kind(name, memory, rm);
+        printf("| %-26s | %-36s | %8.2f | %9.2f | %9.2f | %7.1f | %5.0f %% | %*.0f %% |\n", name, shape,
+               memory ? work * 1e-6 : work * 1e-9, tm * 1e3, cm * 1e3, work / tm * 1e-9, 100.0 * rm, memory ? 8 : 7,
+               100.0 * crm);
+    } else {
+        printf("| %-26s | %-36s | %8s | %9.2f | %9.2f | %7s | %7s | %10s |\n", name, shape, "-", tm * 1e3, cm * 1e3, "-",
                "-", "-");
+    }
     fflush(stdout);
+    free(sx), free(sy);
 }
 
 static void check(g3d_status rc)
@@ -170,7 +221,7 @@ static void lin(const char *name, int n, int in, int out, g3d_act act, int resid
     char shape[64];
     snprintf(shape, sizeof shape, "%dx%d -> %d%s%s%s", n, in, out, act ? " +act" : "", residual ? " +ls+res" : "",
              store == G3D_DT_BF16 ? " bf16" : "");
-    run(name, shape, 2.0 * n * in * out, lin_fn, &c);
+    run(name, shape, 2.0 * n * in * out, 0, lin_fn, &c);
     g3d_nn_lin_free(&c.L);
     free(c.x), free(c.y), free(c.w), free(c.b), free(c.gamma);
 }
@@ -212,7 +263,7 @@ static void attn(const char *name, int nq, int nk, int heads, int hd, int window
     char shape[64];
     snprintf(shape, sizeof shape, "%d x %d tok, %dx%d%s%s", nq, nk, heads, hd, relpos ? " relpos" : "",
              windows > 1 ? " x25 win" : "");
-    run(name, shape, 4.0 * nq * nk * d * windows, attn_fn, &c);
+    run(name, shape, 4.0 * nq * nk * d * windows, 0, attn_fn, &c);
     free(q), free(k), free(v), free(o), free(rh), free(rw), free(relh);
 }
 
@@ -244,16 +295,19 @@ static void conv(const char *name, int cin, int cout, int k, int stride, int pad
     check(g3d_nn_conv_out_size(&c.c, h, w, &ho, &wo));
     c.x = rnd((size_t)cin * h * w, 1.0f), c.y = malloc(sizeof(float) * (size_t)cout * ho * wo);
     double flops = transposed ? 2.0 * cin * cout * k * k * h * w : 2.0 * cout * (cin / groups) * k * k * ho * wo;
+    /* a depthwise convolution does k*k multiply-adds per value it reads: bound by memory */
+    const int depthwise = groups > 1 && groups == cin;
+    const double bytes = depthwise ? 4.0 * ((double)cin * h * w + (double)cout * ho * wo) : 0;
     char shape[64];
     snprintf(shape, sizeof shape, "%s%dx%dx%d -> %d k%d s%d%s%s", transposed ? "T " : "", cin, h, w, cout, k, stride,
              groups > 1 ? " dw" : mode == G3D_PAD_REFLECT ? " reflect" : mode == G3D_PAD_REPLICATE ? " repl" : "",
              c.c.prep && !transposed ? " wino" : "");
-    run(name, shape, flops, conv_fn, &c);
+    run(name, shape, depthwise ? 0 : flops, bytes, conv_fn, &c);
     g3d_nn_conv_release(&c.c);
     free(wt), free(b), free(c.x), free(c.y);
 }
 
-/* ---- memory-bound operators: time only ------------------------------------------------------ */
+/* ---- memory-bound operators ------------------------------------------------------------------ */
 typedef struct misc_case {
     int kind, c, h, w;
     float *x, *y, *g, *b;
@@ -277,7 +331,9 @@ static void misc(const char *name, const char *shape, int kind, int c, int h, in
     misc_case m = {.kind = kind, .c = c, .h = h, .w = w};
     size_t n = (size_t)c * h * (w + 2) * 2;
     m.x = rnd(n, 1.0f), m.y = rnd(n, 1.0f), m.g = rnd(c, 1.0f), m.b = rnd(c, 1.0f);
-    run(name, shape, 0, misc_fn, &m);
+    /* the norms and GELU read and write c*h*w values once each; the FFTs are timed alone */
+    const double bytes = kind == 2 || kind == 3 ? 0 : 8.0 * c * h * w;
+    run(name, shape, 0, bytes, misc_fn, &m);
     free(m.x), free(m.y), free(m.g), free(m.b);
 }
 
@@ -371,11 +427,11 @@ int main(int argc, char **argv)
     conv("conv1 lama fu 384", 384, 384, 1, 1, 0, 64, 33, 1, G3D_PAD_ZEROS, 0, 0, 0);
     conv("conv1 lama st 384->192", 384, 192, 1, 1, 0, 64, 64, 1, G3D_PAD_ZEROS, 0, 0, 0);
     conv("conv1 dpt-s 64 @148", 64, 64, 1, 1, 0, 148, 148, 1, G3D_PAD_ZEROS, 0, 0, 0);
-    conv("conv dw3 tinyvit 256", 256, 256, 3, 1, 1, 256, 256, 256, G3D_PAD_ZEROS, 0, 0, 0);
     conv("convT lama k3s2 512->256", 512, 256, 3, 2, 1, 64, 64, 1, G3D_PAD_ZEROS, 1, 1, 1);
     conv("convT sam k2s2 256->64", 256, 64, 2, 2, 0, 64, 64, 1, G3D_PAD_ZEROS, 1, 0, 1);
     conv("convT dpt k4s4 48", 384, 48, 4, 4, 0, 37, 37, 1, G3D_PAD_ZEROS, 1, 0, 1);
 
+    conv("dwconv 3x3 256", 256, 256, 3, 1, 1, 256, 256, 256, G3D_PAD_ZEROS, 0, 0, 0);
     misc("groupnorm+silu vae", "128 x 512x512, 32 groups", 0, 128, 512, 512);
     misc("layernorm sam-b", "4096 x 768", 1, 768, 4096, 1);
     misc("gelu sam-b mlp", "4096 x 3072", 4, 3072, 4096, 1);
@@ -387,14 +443,23 @@ int main(int argc, char **argv)
         fprintf(stderr, "bench_nn: no operator's name contains \"%s\"\n", g_filter);
         return 1;
     }
-    printf("\nper op kind (sgemm %.0f-%.0f GFLOP/s during the run):\n", g_sgemm_lo, g_sgemm_hi);
-    printf("| %-10s | %6s | %14s | %10s |\n", "kind", "shapes", "median sgemm", "lowest");
-    printf("|------------|--------|----------------|------------|\n");
-    for (int i = 0; i < g_nkinds; i++) {
-        qsort(g_kinds[i].frac, g_kinds[i].n, sizeof(double), cmp_double);
-        const int n = g_kinds[i].n;
-        const double med = n % 2 ? g_kinds[i].frac[n / 2] : 0.5 * (g_kinds[i].frac[n / 2 - 1] + g_kinds[i].frac[n / 2]);
-        printf("| %-10s | %6d | %12.0f %% | %8.0f %% |\n", g_kinds[i].name, n, 100.0 * med, 100.0 * g_kinds[i].frac[0]);
+    for (int memory = 0; memory < 2; memory++) {
+        int any = 0;
+        for (int i = 0; i < g_nkinds; i++) any |= g_kinds[i].memory == memory;
+        if (!any) continue;
+        if (!memory)
+            printf("\nper op kind (sgemm %.0f-%.0f GFLOP/s during the run):\n", g_sgemm_lo, g_sgemm_hi);
+        else
+            printf("\nper memory-bound kind (streaming pass %.1f-%.1f GB/s during the run):\n", g_stream_lo, g_stream_hi);
+        printf("| %-14s | %6s | %14s | %10s |\n", "kind", "shapes", memory ? "median stream" : "median sgemm", "lowest");
+        printf("|----------------|--------|----------------|------------|\n");
+        for (int i = 0; i < g_nkinds; i++) {
+            if (g_kinds[i].memory != memory) continue;
+            qsort(g_kinds[i].frac, g_kinds[i].n, sizeof(double), cmp_double);
+            const int n = g_kinds[i].n;
+            const double med = n % 2 ? g_kinds[i].frac[n / 2] : 0.5 * (g_kinds[i].frac[n / 2 - 1] + g_kinds[i].frac[n / 2]);
+            printf("| %-14s | %6d | %12.0f %% | %8.0f %% |\n", g_kinds[i].name, n, 100.0 * med, 100.0 * g_kinds[i].frac[0]);
+        }
     }
     free(g_a), free(g_b), free(g_c);
     return 0;

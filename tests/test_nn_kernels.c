@@ -212,6 +212,10 @@ TEST(conv_against_reference)
         {16, 1, 5, 1, 2, 1, 1, 6, 40, 0, 0, G3D_PAD_ZEROS},
         {16, 4, 5, 1, 1, 1, 1, 9, 8, 0, 0, G3D_PAD_REPLICATE},
         {16, 4, 7, 1, 3, 1, 1, 6, 2000, 0, 0, G3D_PAD_REFLECT}, /* bands of 4 and 2 rows */
+        /* depthwise, stride 1: rows in blocks of 64 and 16 outputs and a tail */
+        {6, 6, 3, 1, 1, 1, 6, 9, 150, 0, 0, G3D_PAD_ZEROS},
+        {5, 5, 7, 1, 6, 2, 5, 11, 83, 0, 0, G3D_PAD_REFLECT},
+        {4, 4, 3, 1, 0, 1, 4, 5, 40, 0, 0, G3D_PAD_ZEROS},
     };
     const int n = (int)(sizeof cases / sizeof *cases);
     for (int i = 0; i < n; i++) {

@@ -11,6 +11,7 @@
  * output pixel. No overlapping scatter-add, and each output is one fixed-order sum. */
 #include "nn/nn_int.h"
 
+#include <immintrin.h>
 #include <math.h>
 #include <omp.h>
 #include <stdlib.h>
@@ -71,60 +72,126 @@ static g3d_nn_epi epi_slice(const g3d_nn_epi *e, int lo, size_t plane)
 }
 
 /* ---- depthwise ------------------------------------------------------------------------- */
-__attribute__((target_clones("avx512f", "avx2", "default"))) static void dw_row(const float *in, float wv, int s,
-                                                                                int wo, float *acc)
+/* n (<= 64) outputs of one row, ox0.. : bias + the taps in order over the padded input rows
+ * (rows[ky] is the row tap row ky reads). Called with constant n and s, the sums stay in
+ * registers across the taps. */
+static inline __attribute__((always_inline)) void dw_block(const float *const *rows, const float *wk, int kh, int kw,
+                                                           int s, int d, int ox0, int n, float bias, float *y)
 {
-    if (s == 1)
-        for (int ox = 0; ox < wo; ox++) acc[ox] += wv * in[ox];
-    else
-        for (int ox = 0; ox < wo; ox++) acc[ox] += wv * in[ox * s];
+    float acc[64];
+    for (int i = 0; i < n; i++) acc[i] = bias;
+    for (int ky = 0; ky < kh; ky++)
+        for (int kx = 0; kx < kw; kx++) {
+            const float wv = wk[ky * kw + kx], *in = rows[ky] + (size_t)ox0 * s + kx * d;
+            for (int i = 0; i < n; i++) acc[i] += wv * in[(size_t)i * s];
+        }
+    memcpy(y + ox0, acc, sizeof(float) * n);
 }
 
+/* Stride 1 with AVX-512: blocks of 64 and then 16 outputs, each sum in a register across the
+ * taps (fused multiply-adds). Returns how many outputs it wrote. */
+__attribute__((target("avx512f"))) static int dw_row512(const float *const *rows, const float *wk, int kh, int kw,
+                                                        int d, int wo, float bias, float *y)
+{
+    int ox0 = 0;
+    for (; ox0 + 64 <= wo; ox0 += 64) {
+        __m512 a0 = _mm512_set1_ps(bias), a1 = a0, a2 = a0, a3 = a0;
+        for (int ky = 0; ky < kh; ky++)
+            for (int kx = 0; kx < kw; kx++) {
+                const __m512 wv = _mm512_set1_ps(wk[ky * kw + kx]);
+                const float *in = rows[ky] + ox0 + kx * d;
+                a0 = _mm512_fmadd_ps(wv, _mm512_loadu_ps(in), a0);
+                a1 = _mm512_fmadd_ps(wv, _mm512_loadu_ps(in + 16), a1);
+                a2 = _mm512_fmadd_ps(wv, _mm512_loadu_ps(in + 32), a2);
+                a3 = _mm512_fmadd_ps(wv, _mm512_loadu_ps(in + 48), a3);
+            }
+        _mm512_storeu_ps(y + ox0, a0), _mm512_storeu_ps(y + ox0 + 16, a1);
+        _mm512_storeu_ps(y + ox0 + 32, a2), _mm512_storeu_ps(y + ox0 + 48, a3);
+    }
+    for (; ox0 + 16 <= wo; ox0 += 16) {
+        __m512 a = _mm512_set1_ps(bias);
+        for (int ky = 0; ky < kh; ky++)
+            for (int kx = 0; kx < kw; kx++)
+                a = _mm512_fmadd_ps(_mm512_set1_ps(wk[ky * kw + kx]), _mm512_loadu_ps(rows[ky] + ox0 + kx * d), a);
+        _mm512_storeu_ps(y + ox0, a);
+    }
+    return ox0;
+}
+
+/* One output row of one channel: y[ox] = bias + sum over the taps of w * rows[ky][ox*s + kx*d]. */
+__attribute__((target_clones("avx2", "default"))) static void dw_row(const float *const *rows, const float *wk,
+                                                                     int kh, int kw, int s, int d, int wo,
+                                                                     float bias, float *y)
+{
+    int ox0 = s == 1 && nn_isa() == NN_ISA_AVX512 ? dw_row512(rows, wk, kh, kw, d, wo, bias, y) : 0;
+    if (s == 1)
+        for (; ox0 + 64 <= wo; ox0 += 64) dw_block(rows, wk, kh, kw, 1, d, ox0, 64, bias, y);
+    else
+        for (; ox0 + 64 <= wo; ox0 += 64) dw_block(rows, wk, kh, kw, s, d, ox0, 64, bias, y);
+    if (ox0 < wo) dw_block(rows, wk, kh, kw, s, d, ox0, wo - ox0, bias, y);
+}
+
+/* Each channel is a stencil over its own plane, read row by row: a ring of the last
+ * (kh-1)*d+1 padded input rows holds what one output row needs, so the plane is read from
+ * memory once and written once, with no padded copy of it. */
 static g3d_status depthwise(const g3d_nn_conv *c, const float *x, int h, int w, int ho, int wo, float *y,
                             const g3d_nn_epi *epi)
 {
-    const int s = one(c->stride), d = one(c->dilation), ph = c->pad_h, pw = c->pad_w;
-    const int hp = h + 2 * ph, wp = w + 2 * pw, kk = c->kh * c->kw;
+    const int s = one(c->stride), d = one(c->dilation), ph = c->pad_h, pw = c->pad_w, kh = c->kh;
+    const int wp = w + 2 * pw, kk = kh * c->kw, ring = (kh - 1) * d + 1;
     const size_t plane = (size_t)ho * wo;
     int failed = 0;
 #pragma omp parallel
     {
-        float *buf = malloc(sizeof(float) * ((size_t)hp * wp + kk + plane));
-        if (!buf) {
+        float *buf = malloc(sizeof(float) * ((size_t)ring * wp + kk + wo));
+        const float **rows = malloc(sizeof(float *) * kh);
+        if (!buf || !rows) {
 #pragma omp atomic write
             failed = 1;
         }
 #pragma omp for schedule(dynamic, 1)
         for (int ch = 0; ch < c->cin; ch++) {
-            if (!buf) continue;
-            /* padded input plane, widened kernel, output plane (y may be epi->res) */
-            float *P = buf, *wk = buf + (size_t)hp * wp, *acc0 = wk + kk;
-            g3d_nn_pad2d(x + (size_t)ch * h * w, 1, h, w, ph, ph, pw, pw, c->pad_mode, P);
+            if (!buf || !rows) continue;
+            const float *xc = x + (size_t)ch * h * w;
+            float *wk = buf + (size_t)ring * wp, *t = wk + kk, *yc = y + (size_t)ch * plane;
             if (c->wtype == G3D_DT_F32)
                 memcpy(wk, (const float *)c->w + (size_t)ch * kk, sizeof(float) * kk);
             else
                 nn_widen(c->wtype, (const uint16_t *)c->w + (size_t)ch * kk, wk, kk);
             const float bias = c->b ? c->b[ch] : 0.0f;
+            int filled = 0; /* padded rows 0..filled-1 have been through the ring */
             for (int oy = 0; oy < ho; oy++) {
-                float *acc = acc0 + (size_t)oy * wo;
-                for (int ox = 0; ox < wo; ox++) acc[ox] = 0.0f;
-                for (int ky = 0; ky < c->kh; ky++)
-                    for (int kx = 0; kx < c->kw; kx++)
-                        dw_row(P + (size_t)(oy * s + ky * d) * wp + kx * d, wk[ky * c->kw + kx], s, wo, acc);
-                for (int ox = 0; ox < wo; ox++) acc[ox] += bias;
+                for (; filled <= oy * s + (kh - 1) * d; filled++) {
+                    float *r = buf + (size_t)(filled % ring) * wp;
+                    const int iy = filled - ph;
+                    if (c->pad_mode == G3D_PAD_ZEROS && (iy < 0 || iy >= h)) {
+                        memset(r, 0, sizeof(float) * wp);
+                        continue;
+                    }
+                    const float *src = xc + (size_t)nn_pad_index(c->pad_mode, iy, h) * w;
+                    memcpy(r + pw, src, sizeof(float) * w);
+                    for (int j = 0; j < pw; j++) {
+                        const int zeros = c->pad_mode == G3D_PAD_ZEROS;
+                        r[j] = zeros ? 0.0f : src[nn_pad_index(c->pad_mode, j - pw, w)];
+                        r[pw + w + j] = zeros ? 0.0f : src[nn_pad_index(c->pad_mode, w + j, w)];
+                    }
+                }
+                for (int ky = 0; ky < kh; ky++) rows[ky] = buf + (size_t)((oy * s + ky * d) % ring) * wp;
+                float *yr = yc + (size_t)oy * wo, *o = epi && epi->res ? t : yr;
+                dw_row(rows, wk, kh, c->kw, s, d, wo, bias, o);
+                if (epi) {
+                    nn_act(epi->act, o, wo);
+                    if (epi->scale)
+                        for (int i = 0; i < wo; i++) o[i] *= epi->scale[ch];
+                    if (epi->res) /* y may be the residual: o is t, stored after the residual is read */
+                        for (int i = 0; i < wo; i++) yr[i] = t[i] + epi->res[(size_t)ch * plane + (size_t)oy * wo + i];
+                }
             }
-            if (epi) {
-                nn_act(epi->act, acc0, (long)plane);
-                if (epi->scale)
-                    for (size_t i = 0; i < plane; i++) acc0[i] *= epi->scale[ch];
-                if (epi->res)
-                    for (size_t i = 0; i < plane; i++) acc0[i] += epi->res[(size_t)ch * plane + i];
-            }
-            memcpy(y + (size_t)ch * plane, acc0, sizeof(float) * plane);
         }
         free(buf);
+        free(rows);
     }
-    if (failed) return G3D_ERR(G3D_ERR_NOMEM, "depthwise conv: cannot allocate scratch for a %dx%d plane", w, h);
+    if (failed) return G3D_ERR(G3D_ERR_NOMEM, "depthwise conv: cannot allocate scratch for %d rows of %d", ring, wp);
     return G3D_OK;
 }
 

@@ -101,13 +101,6 @@ static int conv_pieces(const nn_convsrc *s, int n0, int nt, piece *p)
     return np;
 }
 
-/* Index of a padded coordinate inside [0, n) (reflect needs pad < n, checked by callers). */
-static int pad_index(g3d_nn_padmode m, int i, int n)
-{
-    if (m == G3D_PAD_REFLECT) return i < 0 ? -i : i >= n ? 2 * (n - 1) - i : i;
-    return i < 0 ? 0 : i >= n ? n - 1 : i;
-}
-
 /* Cloned per instruction set: the stride-2 gathers of downsampling convolutions vectorise
  * with AVX-512's two-register permutes. */
 __attribute__((target_clones("avx512f", "avx2", "default"))) static void
@@ -127,7 +120,7 @@ pack_conv(const nn_convsrc *s, int k0, int kc, const piece *p, int np, int nt, f
                     memset(d, 0, sizeof(float) * len);
                     continue;
                 }
-                iy = pad_index(s->pad, iy, h);
+                iy = nn_pad_index(s->pad, iy, h);
             }
             const float *row = plane + (size_t)iy * w;
             int ix0 = p[e].qx * st + dx;
@@ -137,14 +130,14 @@ pack_conv(const nn_convsrc *s, int k0, int kc, const piece *p, int np, int nt, f
             if (hi > len) hi = len;
             if (lo > len) lo = len;
             if (hi < lo) hi = lo;
-            for (int u = 0; u < lo; u++) d[u] = zeros ? 0.0f : row[pad_index(s->pad, ix0 + u * st, w)];
+            for (int u = 0; u < lo; u++) d[u] = zeros ? 0.0f : row[nn_pad_index(s->pad, ix0 + u * st, w)];
             if (st == 1)
                 copy_run(d + lo, row + ix0 + lo, hi - lo);
             else if (st == 2) /* a constant stride vectorises */
                 for (int u = lo; u < hi; u++) d[u] = row[ix0 + 2 * u];
             else
                 for (int u = lo; u < hi; u++) d[u] = row[ix0 + u * st];
-            for (int u = hi; u < len; u++) d[u] = zeros ? 0.0f : row[pad_index(s->pad, ix0 + u * st, w)];
+            for (int u = hi; u < len; u++) d[u] = zeros ? 0.0f : row[nn_pad_index(s->pad, ix0 + u * st, w)];
         }
     }
     zero_tail(bp, kc, nt);

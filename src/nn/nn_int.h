@@ -103,6 +103,14 @@ float *nn_wino_weights(const g3d_nn_conv *c);
 g3d_status nn_wino_forward(const g3d_nn_conv *c, const float *U, const float *x, int h, int w, int ho, int wo, float *y,
                            const g3d_nn_epi *epi);
 
+/* Index of a padded coordinate inside [0, n) for reflect or replicate padding (reflect needs
+ * pad < n, checked by callers). */
+static inline int nn_pad_index(g3d_nn_padmode m, int i, int n)
+{
+    if (m == G3D_PAD_REFLECT) return i < 0 ? -i : i >= n ? 2 * (n - 1) - i : i;
+    return i < 0 ? 0 : i >= n ? n - 1 : i;
+}
+
 /* ---- element-wise helpers (act.c) ----------------------------------------------------- */
 /* Tuned in-place activation over n contiguous values. */
 void nn_act(g3d_act act, float *x, long n);
