@@ -83,6 +83,16 @@ static void pack_cols(const float *b, long ldb, int k0, int kc, int n0, int nt, 
     zero_tail(bp, kc, nt);
 }
 
+/* Asks for the block of B a tile reads in place (kc rows of nt columns, a multiple of 16, at
+ * row stride ldb) to be brought into L2, in the order its first group of rows reads it: one
+ * request per line, all issued before the kernel waits for the first of them. */
+static void prefetch_rows(const float *b, long ldb, int kc, int nt)
+{
+    for (int q = 0; q * 64 < nt; q++)
+        for (int k = 0; k < kc; k++)
+            for (int j = 64 * q; j < nt && j < 64 * q + 64; j += 16) _mm_prefetch((const char *)(b + k * ldb + j), _MM_HINT_T1);
+}
+
 /* A run of output pixels on one row of the output grid inside one panel. */
 typedef struct piece {
     int qy, qx, len, t;
@@ -338,9 +348,20 @@ static void run_tile(const nn_gemm *g, const tiling *t, const scratch *s, int m0
         const int kc = g->K - k0 < t->KC ? g->K - k0 : t->KC, last = k0 + kc == g->K;
         /* B block */
         const float *bp = s->bp;
-        long pstride = (long)kc * 64; /* floats between panels */
+        long pstride = (long)kc * 64, ldbk = 64; /* floats between panels, between rows */
         switch (g->bkind) {
-        case NN_B_ROWS: pack_rows(g->b, g->ldb, k0, kc, n0, nt, s->bp); break;
+        case NN_B_ROWS:
+            /* A block of at most 64 rows (a 1x1 convolution over 64 channels) is read in place,
+             * where its rows already are: its pages stay within reach of the first-level TLB
+             * (72 entries) while the kernel steps through them. The packing had been a fifth of
+             * the DPT head's 64-channel 1x1 convolution at 148 x 148 (6 % faster without it). */
+            if (kc <= 64 && nt % 16 == 0) {
+                bp = (const float *)g->b + (long)k0 * g->ldb + n0, pstride = 64, ldbk = g->ldb;
+                prefetch_rows(bp, ldbk, kc, nt);
+            } else {
+                pack_rows(g->b, g->ldb, k0, kc, n0, nt, s->bp);
+            }
+            break;
         case NN_B_COLS: pack_cols(g->b, g->ldb, k0, kc, n0, nt, s->bp); break;
         case NN_B_CONV: pack_conv(g->conv, k0, kc, s->pieces, np, nt, s->bp); break;
         default:
@@ -387,7 +408,7 @@ static void run_tile(const nn_gemm *g, const tiling *t, const scratch *s, int m0
             if (direct && rows >= NN_MR) cp = cdir + (long)ir * g->ldy, lc = g->ldy;
             for (int q = 0; q < npan; q++) {
                 int cols = nt - 64 * q < 64 ? nt - 64 * q : 64;
-                nn_kernel(kc, ap, la, lk, bp + q * pstride, 64, cp + 64 * q, lc, (cols + 15) / 16, k0 > 0);
+                nn_kernel(kc, ap, la, lk, bp + q * pstride, ldbk, cp + 64 * q, lc, (cols + 15) / 16, k0 > 0);
             }
             const int end = rows < NN_MR ? mt : ir + NN_MR;
             if (!last || (end % egroup && end < mt)) continue;
