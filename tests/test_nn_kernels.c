@@ -449,11 +449,12 @@ TEST(independent_of_thread_count)
     float *x4 = rnd((size_t)64 * h * w, 7, 1), *w4 = rnd((size_t)70 * 64 * 9, 8, 0.1f);
     /* a 1x1 convolution and a transposed one with kernel = stride (interleaved rows), residuals */
     float *res1 = rnd((size_t)cout * h * w, 9, 1), *resT = rnd((size_t)30 * 4 * h * w, 10, 1), *b64 = rnd(64, 11, 1);
+    float *bl = rnd(out, 12, 1);
     /* few rows: column tiles 16 wide (float32 and bf16 panels) */
     const int nf = 13;
     g3d_nn_lin lf, lb;
-    CHECK_OK(g3d_nn_lin_init(&lf, wl, G3D_DT_F32, g, out, in, G3D_DT_F32));
-    CHECK_OK(g3d_nn_lin_init(&lb, wl, G3D_DT_F32, g, out, in, G3D_DT_BF16));
+    CHECK_OK(g3d_nn_lin_init(&lf, wl, G3D_DT_F32, bl, out, in, G3D_DT_F32));
+    CHECK_OK(g3d_nn_lin_init(&lb, wl, G3D_DT_F32, bl, out, in, G3D_DT_BF16));
     float *ref[13] = {0}, *got[13];
     const int maxt = omp_get_max_threads();
     for (int t = 1; t <= 3; t++) {
@@ -526,7 +527,7 @@ TEST(independent_of_thread_count)
     omp_set_num_threads(maxt);
     for (int i = 0; i < 13; i++) free(ref[i]);
     g3d_nn_lin_free(&lf), g3d_nn_lin_free(&lb);
-    free(x4), free(w4), free(res1), free(resT), free(b64);
+    free(x4), free(w4), free(res1), free(resT), free(b64), free(bl);
     free(x), free(wc), free(wl), free(tok), free(qkv), free(g);
 }
 
