@@ -388,7 +388,9 @@ int main(int argc, char **argv)
     lin("linear sam-b mlp2", 4096, 3072, 768, G3D_ACT_NONE, 1, G3D_DT_F32, 0);
     lin("linear sd geglu proj", 4096, 320, 2560, G3D_ACT_NONE, 0, G3D_DT_F32, 0);
     lin("linear sd ff out", 4096, 1280, 320, G3D_ACT_NONE, 1, G3D_DT_F32, 0);
-    lin("linear sd text k/v", 77, 768, 320, G3D_ACT_NONE, 0, G3D_DT_F32, 0);
+    /* SD 1.x's cross-attention projects the 77 text tokens to its keys and values in one product
+     * ([k; v] packed at load): 640 outputs at the first level (1280, 2560 deeper) */
+    lin("linear sd text k/v", 77, 768, 640, G3D_ACT_NONE, 0, G3D_DT_F32, 0);
 
     attn("attention dinov2-s", 1370, 1370, 6, 64, 1, 0, 0);
     attn("attention dinov2-l", 1370, 1370, 16, 64, 1, 0, 0);

@@ -67,9 +67,10 @@ TEST(matmul_shapes_and_transposes)
     CHECK_FAILS(g3d_nn_matmul(0, 0, -1, 1, 1, 1.0f, &c, 1, &c, 1, 0.0f, &c, 1));
 }
 
-TEST(linear_epilogues_and_16bit_weights)
+/* n = 13: all rows in one tile, so the columns are split into tiles 16 wide, inside the panels */
+static void check_linear(int n)
 {
-    const int n = 101, in = 77, out = 150;
+    const int in = 77, out = 150;
     float *x = rnd((size_t)n * in, 1, 1), *w = rnd((size_t)out * in, 2, 0.2f), *b = rnd(out, 3, 1), *g = rnd(out, 4, 1);
     float *res = rnd((size_t)n * out, 5, 1), *y = malloc(sizeof(float) * n * out), *r = malloc(sizeof(float) * n * out);
     for (g3d_act act = G3D_ACT_NONE; act <= G3D_ACT_TANH; act++)
@@ -83,7 +84,8 @@ TEST(linear_epilogues_and_16bit_weights)
             CHECK_OK(g3d_nn_lin_forward(&L, x, n, 0, y, 0, &e));
             g3d_nn_epi er = {.act = act, .scale = g, .res = res};
             nn_ref_linear(x, n, in, w, b, out, &er, r);
-            CHECK_MSG(err(y, r, (size_t)n * out) < 2e-5, "act %d isa %d: %g", act, isas[i], err(y, r, (size_t)n * out));
+            CHECK_MSG(err(y, r, (size_t)n * out) < 2e-5, "%d rows act %d isa %d: %g", n, act, isas[i],
+                      err(y, r, (size_t)n * out));
             g3d_nn_lin_free(&L);
             nn_isa_force(old);
         }
@@ -113,10 +115,17 @@ TEST(linear_epilogues_and_16bit_weights)
         g3d_nn_lin_free(&L2), g3d_nn_lin_free(&L16), g3d_nn_lin_free(&Lr);
         free(h), free(wr), free(y2);
     }
-    g3d_nn_lin L;
-    CHECK_FAILS(g3d_nn_lin_init(&L, w, G3D_DT_I32, b, out, in, G3D_DT_F32));
-    CHECK_FAILS(g3d_nn_lin_init(&L, w, G3D_DT_F32, b, 0, in, G3D_DT_F32));
     free(x), free(w), free(b), free(g), free(res), free(y), free(r);
+}
+
+TEST(linear_epilogues_and_16bit_weights)
+{
+    check_linear(101);
+    check_linear(13);
+    g3d_nn_lin L;
+    float w = 1;
+    CHECK_FAILS(g3d_nn_lin_init(&L, &w, G3D_DT_I32, NULL, 1, 1, G3D_DT_F32));
+    CHECK_FAILS(g3d_nn_lin_init(&L, &w, G3D_DT_F32, NULL, 0, 1, G3D_DT_F32));
 }
 
 typedef struct conv_case {
@@ -187,6 +196,7 @@ TEST(conv_against_reference)
         {40, 30, 1, 1, 0, 1, 1, 13, 21, 0, 0, G3D_PAD_ZEROS},      /* pointwise */
         {400, 9, 1, 1, 0, 1, 1, 7, 11, 0, 0, G3D_PAD_ZEROS},       /* pointwise, two K blocks */
         {12, 520, 1, 1, 0, 1, 1, 5, 7, 0, 0, G3D_PAD_ZEROS},       /* pointwise, two row tiles */
+        {64, 64, 1, 1, 0, 1, 1, 37, 37, 0, 0, G3D_PAD_ZEROS},      /* pointwise, last rows in place */
         {7, 5, 1, 2, 0, 1, 1, 13, 21, 0, 0, G3D_PAD_ZEROS},
         {2, 3, 3, 1, 1, 1, 1, 1, 2, 0, 0, G3D_PAD_ZEROS},          /* mostly padding */
         {20, 11, 3, 2, 1, 1, 1, 9, 8, 1, 1, G3D_PAD_ZEROS},        /* transposed */
@@ -453,8 +463,14 @@ TEST(independent_of_thread_count)
     /* prepared: F(2x2) at 40->50, F(4x4) at 64->70 */
     float *x4 = rnd((size_t)64 * h * w, 7, 1), *w4 = rnd((size_t)70 * 64 * 9, 8, 0.1f);
     /* a 1x1 convolution and a transposed one with kernel = stride (interleaved rows), residuals */
-    float *res1 = rnd((size_t)cout * h * w, 9, 1), *resT = rnd((size_t)30 * 4 * h * w, 10, 1);
-    float *ref[10] = {0}, *got[10];
+    float *res1 = rnd((size_t)cout * h * w, 9, 1), *resT = rnd((size_t)30 * 4 * h * w, 10, 1), *b64 = rnd(64, 11, 1);
+    float *bl = rnd(out, 12, 1);
+    /* few rows: column tiles 16 wide (float32 and bf16 panels) */
+    const int nf = 13;
+    g3d_nn_lin lf, lb;
+    CHECK_OK(g3d_nn_lin_init(&lf, wl, G3D_DT_F32, bl, out, in, G3D_DT_F32));
+    CHECK_OK(g3d_nn_lin_init(&lb, wl, G3D_DT_F32, bl, out, in, G3D_DT_BF16));
+    float *ref[13] = {0}, *got[13];
     const int maxt = omp_get_max_threads();
     for (int t = 1; t <= 3; t++) {
         omp_set_num_threads(t);
@@ -501,10 +517,20 @@ TEST(independent_of_thread_count)
         g3d_nn_attn cross = {.nq = n, .nk = 77, .heads = 4, .hd = 16, .q = qkv, .k = qkv + 64, .v = qkv + 128,
                              .ldq = 192, .ldk = 192, .ldv = 192, .out = got[9], .scale = 0.25f};
         CHECK_OK(g3d_nn_attend(&cross));
-        const size_t sz[10] = {(size_t)cout * h * w, (size_t)n * out,     (size_t)n * 64,     (size_t)cout * h * w,
-                               (size_t)cin * h * w,  (size_t)cout * h * w, (size_t)70 * h * w, (size_t)cout * h * w,
-                               (size_t)30 * 4 * h * w, (size_t)n * 64};
-        for (int i = 0; i < 10; i++) {
+        const g3d_nn_epi gelu = {.act = G3D_ACT_GELU};
+        got[10] = malloc(sizeof(float) * nf * out);
+        CHECK_OK(g3d_nn_lin_forward(&lf, tok, nf, 0, got[10], 0, &gelu));
+        got[11] = malloc(sizeof(float) * nf * out);
+        CHECK_OK(g3d_nn_lin_forward(&lb, tok, nf, 0, got[11], 0, NULL));
+        /* 64 output channels: the last four rows of each tile in place with the two before */
+        got[12] = malloc(sizeof(float) * 64 * h * w);
+        g3d_nn_conv p64 = g3d_nn_conv_make(64, 64, 1, 1, 0, w4, b64);
+        CHECK_OK(g3d_nn_conv_forward(&p64, x4, h, w, got[12], &gelu));
+        const size_t sz[13] = {(size_t)cout * h * w,   (size_t)n * out,     (size_t)n * 64,     (size_t)cout * h * w,
+                               (size_t)cin * h * w,    (size_t)cout * h * w, (size_t)70 * h * w, (size_t)cout * h * w,
+                               (size_t)30 * 4 * h * w, (size_t)n * 64,      (size_t)nf * out,   (size_t)nf * out,
+                               (size_t)64 * h * w};
+        for (int i = 0; i < 13; i++) {
             if (t == 1) {
                 ref[i] = got[i];
                 continue;
@@ -514,8 +540,9 @@ TEST(independent_of_thread_count)
         }
     }
     omp_set_num_threads(maxt);
-    for (int i = 0; i < 10; i++) free(ref[i]);
-    free(x4), free(w4), free(res1), free(resT);
+    for (int i = 0; i < 13; i++) free(ref[i]);
+    g3d_nn_lin_free(&lf), g3d_nn_lin_free(&lb);
+    free(x4), free(w4), free(res1), free(resT), free(b64), free(bl);
     free(x), free(wc), free(wl), free(tok), free(qkv), free(g);
 }
 
