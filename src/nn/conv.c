@@ -138,7 +138,7 @@ static g3d_status depthwise(const g3d_nn_conv *c, const float *x, int h, int w, 
                             const g3d_nn_epi *epi)
 {
     const int s = one(c->stride), d = one(c->dilation), ph = c->pad_h, pw = c->pad_w, kh = c->kh;
-    const int wp = w + 2 * pw, kk = kh * c->kw, ring = (kh - 1) * d + 1;
+    const int wp = w + 2 * pw, kk = kh * c->kw, ring = (kh - 1) * d + 1, zeros = c->pad_mode == G3D_PAD_ZEROS;
     const size_t plane = (size_t)ho * wo;
     int failed = 0;
 #pragma omp parallel
@@ -164,14 +164,13 @@ static g3d_status depthwise(const g3d_nn_conv *c, const float *x, int h, int w, 
                 for (; filled <= oy * s + (kh - 1) * d; filled++) {
                     float *r = buf + (size_t)(filled % ring) * wp;
                     const int iy = filled - ph;
-                    if (c->pad_mode == G3D_PAD_ZEROS && (iy < 0 || iy >= h)) {
+                    if (zeros && (iy < 0 || iy >= h)) {
                         memset(r, 0, sizeof(float) * wp);
                         continue;
                     }
                     const float *src = xc + (size_t)nn_pad_index(c->pad_mode, iy, h) * w;
                     memcpy(r + pw, src, sizeof(float) * w);
                     for (int j = 0; j < pw; j++) {
-                        const int zeros = c->pad_mode == G3D_PAD_ZEROS;
                         r[j] = zeros ? 0.0f : src[nn_pad_index(c->pad_mode, j - pw, w)];
                         r[pw + w + j] = zeros ? 0.0f : src[nn_pad_index(c->pad_mode, w + j, w)];
                     }

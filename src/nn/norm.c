@@ -9,8 +9,8 @@
 
 /* Sum of x[i] (or of (x[i] - m)^2 when sq) over n values: 64 float lanes (four independent
  * vector sums), then double. */
-__attribute__((target_clones("avx512f", "avx2", "default"))) static double sum16(const float *x, size_t n, int sq,
-                                                                                float m)
+__attribute__((target_clones("avx512f", "avx2", "default"))) static double lane_sum(const float *x, size_t n,
+                                                                                   int sq, float m)
 {
     float lane[64] = {0};
     size_t i = 0;
@@ -32,8 +32,8 @@ void g3d_nn_layernorm(const float *x, int n, int c, const float *g, const float 
     for (int i = 0; i < n; i++) {
         const float *xi = x + (size_t)i * c;
         float *yi = y + (size_t)i * c;
-        float mean = (float)(sum16(xi, c, 0, 0) / c);
-        float var = (float)(sum16(xi, c, 1, mean) / c);
+        float mean = (float)(lane_sum(xi, c, 0, 0) / c);
+        float var = (float)(lane_sum(xi, c, 1, mean) / c);
         float inv = 1.0f / sqrtf(var + eps);
         for (int j = 0; j < c; j++) yi[j] = (xi[j] - mean) * inv * g[j] + b[j];
     }
@@ -64,7 +64,7 @@ void g3d_nn_groupnorm(const float *x, int c, int hw, int groups, const float *g,
 #pragma omp for schedule(static)
             for (long t = (long)(g0 * nch); t < (long)(g1 * nch); t++) {
                 size_t gr = t / nch, lo = (t % nch) * chunk, n = gsize - lo < chunk ? gsize - lo : chunk;
-                part[t] = sum16(x + gr * gsize + lo, n, pass, pass ? mean[gr] : 0.0f);
+                part[t] = lane_sum(x + gr * gsize + lo, n, pass, pass ? mean[gr] : 0.0f);
             }
 #pragma omp single
             for (int gr = g0; gr < g1; gr++) {
